@@ -1,0 +1,129 @@
+//! Metric camera models and the metric reconstruction they parameterize.
+//!
+//! Orthographic camera (Tomasi & Kanade 1992): `[x, y]ᵀ = R_f[0..2] X_p + t_f`.
+//! Scaled orthographic / weak perspective (Poelman & Kanade 1997):
+//! `[x, y]ᵀ = s_f R_f[0..2] X_p + t_f`, with `s_f > 0` the per-frame magnification.
+//! `R_f` is a rotation whose rows are the camera axes `i_f, j_f, k_f = i_f × j_f` in world
+//! coordinates, `t_f` the image translation (pixels).
+
+use faer::Mat;
+use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::Measurements;
+
+/// Which metric camera the upgrade and the refinement use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CameraModel {
+    /// Orthographic projection: unit scale in every frame.
+    #[default]
+    Orthographic,
+    /// Scaled orthographic (weak perspective): one positive scale per frame.
+    ScaledOrthographic,
+}
+
+impl std::fmt::Display for CameraModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            CameraModel::Orthographic => "orthographic",
+            CameraModel::ScaledOrthographic => "scaled-orthographic",
+        })
+    }
+}
+
+/// Per-frame metric cameras and per-track 3D points.
+///
+/// Projection of point `p` in frame `f`:
+/// `[x, y] = scales[f] · rotations[f][rows 0..2] · points[p] + translations[f]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MetricModel {
+    pub rotations: Vec<Rotation3<f64>>,
+    pub translations: Vec<Vector2<f64>>,
+    /// All ones for the orthographic model.
+    pub scales: Vec<f64>,
+    pub points: Vec<Vector3<f64>>,
+}
+
+impl MetricModel {
+    /// Number of frames.
+    pub fn n_frames(&self) -> usize {
+        self.rotations.len()
+    }
+
+    /// Number of points.
+    pub fn n_points(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Image position of point `p` in frame `f`.
+    #[inline]
+    pub fn project(&self, f: usize, p: usize) -> Vector2<f64> {
+        let r = self.rotations[f].matrix();
+        let x = &self.points[p];
+        let s = self.scales[f];
+        Vector2::new(
+            s * (r[(0, 0)] * x[0] + r[(0, 1)] * x[1] + r[(0, 2)] * x[2]),
+            s * (r[(1, 0)] * x[0] + r[(1, 1)] * x[1] + r[(1, 2)] * x[2]),
+        ) + self.translations[f]
+    }
+
+    /// Predicted 2F×N matrix for every frame and point.
+    pub fn predict(&self) -> Mat<f64> {
+        Mat::from_fn(2 * self.n_frames(), self.n_points(), |r, p| {
+            self.project(r / 2, p)[r % 2]
+        })
+    }
+
+    /// RMS reprojection error over observed scalars (x, y counted separately).
+    pub fn rms(&self, meas: &Measurements) -> f64 {
+        let mut ss = 0.0;
+        let mut n = 0usize;
+        for (f, p) in meas.observed_pairs() {
+            let q = self.project(f, p);
+            let dx = q[0] - meas.w[(2 * f, p)];
+            let dy = q[1] - meas.w[(2 * f + 1, p)];
+            ss += dx * dx + dy * dy;
+            n += 2;
+        }
+        if n == 0 { 0.0 } else { (ss / n as f64).sqrt() }
+    }
+
+    /// Per-point linear least-squares triangulation given the cameras:
+    /// `X_p = argmin Σ_f ‖s_f R_f[0..2] X − (w_fp − t_f)‖²` over the frames observing `p`.
+    ///
+    /// Each point solves a 3×3 normal system, so the cost is O(observations). Points whose
+    /// normal matrix is singular (seen from a single viewing direction) keep their previous
+    /// value and are returned in the list of indices.
+    pub fn triangulate(&mut self, meas: &Measurements) -> Vec<usize> {
+        let n = meas.n_points();
+        let mut ata = vec![Matrix3::<f64>::zeros(); n];
+        let mut atb = vec![Vector3::<f64>::zeros(); n];
+        for (f, p) in meas.observed_pairs() {
+            let r = self.rotations[f].matrix();
+            let s = self.scales[f];
+            for row in 0..2 {
+                let a = Vector3::new(r[(row, 0)], r[(row, 1)], r[(row, 2)]) * s;
+                let b = meas.w[(2 * f + row, p)] - self.translations[f][row];
+                ata[p] += a * a.transpose();
+                atb[p] += a * b;
+            }
+        }
+        let mut failed = Vec::new();
+        for p in 0..n {
+            let m = ata[p];
+            // Reject near-singular systems relative to their own scale.
+            let eig = m.symmetric_eigenvalues();
+            let (lo, hi) = (eig.min(), eig.max());
+            if hi <= 0.0 || lo <= 1e-10 * hi {
+                failed.push(p);
+                continue;
+            }
+            match m.cholesky() {
+                Some(ch) => self.points[p] = ch.solve(&atb[p]),
+                None => failed.push(p),
+            }
+        }
+        failed
+    }
+}

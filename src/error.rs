@@ -1,0 +1,113 @@
+//! Typed errors for bad input and impossible requests.
+//!
+//! How a solver *ended* (converged, hit its iteration cap, stalled) is not an error:
+//! it is reported in [`crate::SolverReport`].
+
+use std::path::PathBuf;
+
+/// Result alias used throughout the crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Everything that can go wrong with user input or a request rank3 cannot honour.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A file could not be opened, read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A value in an input file is malformed; `line` is 1-based, `field` names the column
+    /// or key (e.g. `x`, `track`, `row 7 column 12`).
+    #[error("{}:{line}: field `{field}`: {message}", path.display())]
+    Parse {
+        path: PathBuf,
+        line: usize,
+        field: String,
+        message: String,
+    },
+    /// The file extension does not name a known track-table format.
+    #[error("{}: unknown track-table format (expected .csv, .txt or .json)", path.display())]
+    UnknownFormat { path: PathBuf },
+    /// The table has no usable observations.
+    #[error("empty track table{}: {reason}", source_suffix(.path))]
+    EmptyTable { path: Option<PathBuf>, reason: String },
+    /// Too few frames, tracks or observations for the requested computation.
+    #[error("not enough {what}: need at least {needed}, have {have}")]
+    TooFew {
+        what: &'static str,
+        needed: usize,
+        have: usize,
+    },
+    /// Matrices or vectors whose sizes do not agree.
+    #[error("dimension mismatch in {context}: expected {expected}, got {got}")]
+    Dimension {
+        context: &'static str,
+        expected: String,
+        got: String,
+    },
+    /// A configuration value outside its valid range.
+    #[error("invalid configuration `{field}`: {message}")]
+    InvalidConfig { field: &'static str, message: String },
+    /// The table has missing entries and the selected path needs complete data.
+    #[error(
+        "the track table has missing entries ({observed} of {total} observations present); \
+         {message}"
+    )]
+    MissingData {
+        observed: usize,
+        total: usize,
+        message: String,
+    },
+    /// The observation pattern splits into blocks of frames and tracks that share no
+    /// observation, so no single reconstruction relates them.
+    #[error(
+        "the observations split into {components} disconnected blocks (frames and tracks that \
+         share no point); the largest has {largest_frames} frames and {largest_tracks} tracks"
+    )]
+    Disconnected {
+        components: usize,
+        largest_frames: usize,
+        largest_tracks: usize,
+    },
+    /// The data do not determine a solution (e.g. all points collinear).
+    #[error("degenerate input: {0}")]
+    Degenerate(String),
+    /// A numerical routine failed in a way that is not the user's fault.
+    #[error("numerical failure in {stage}: {message}")]
+    Numerical { stage: &'static str, message: String },
+}
+
+fn source_suffix(path: &Option<PathBuf>) -> String {
+    match path {
+        Some(p) => format!(" ({})", p.display()),
+        None => String::new(),
+    }
+}
+
+impl Error {
+    /// Shorthand for an [`Error::Io`].
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// Shorthand for an [`Error::Parse`].
+    pub fn parse(
+        path: impl Into<PathBuf>,
+        line: usize,
+        field: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Self {
+        Error::Parse {
+            path: path.into(),
+            line,
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+}

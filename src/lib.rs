@@ -1,0 +1,26 @@
+//! # rank3
+//!
+//! Structure and motion from 2D point tracks by Tomasi–Kanade factorization,
+//! made to work on real, partial, messy track tables.
+//!
+//! Pipeline: [`tracks::TrackTable`] → set-aside of under-observed tracks and frames →
+//! observation matrix `W` (2F×N) → rank-3 factorization (centering + truncated SVD for
+//! complete data, low-rank completion for missing data) → metric upgrade
+//! ([`metric`]) → Levenberg–Marquardt refinement ([`refine`]) → [`reconstruction::Reconstruction`].
+//!
+//! References: C. Tomasi and T. Kanade, "Shape and motion from image streams under
+//! orthography: a factorization method", IJCV 9(2), 1992; C. J. Poelman and T. Kanade,
+//! "A paraperspective factorization method for shape and motion recovery", PAMI 19(3), 1997.
+
+pub mod camera;
+pub mod datasets;
+pub mod error;
+pub mod measurements;
+pub mod observer;
+pub mod solver;
+
+pub use camera::{CameraModel, MetricModel};
+pub use error::{Error, Result};
+pub use measurements::Measurements;
+pub use observer::{Event, NoopObserver, Observer};
+pub use solver::{SolverReport, SolverStatus};
