@@ -33,7 +33,10 @@ pub enum Error {
     UnknownFormat { path: PathBuf },
     /// The table has no usable observations.
     #[error("empty track table{}: {reason}", source_suffix(.path))]
-    EmptyTable { path: Option<PathBuf>, reason: String },
+    EmptyTable {
+        path: Option<PathBuf>,
+        reason: String,
+    },
     /// Too few frames, tracks or observations for the requested computation.
     #[error("not enough {what}: need at least {needed}, have {have}")]
     TooFew {
@@ -50,7 +53,10 @@ pub enum Error {
     },
     /// A configuration value outside its valid range.
     #[error("invalid configuration `{field}`: {message}")]
-    InvalidConfig { field: &'static str, message: String },
+    InvalidConfig {
+        field: &'static str,
+        message: String,
+    },
     /// The table has missing entries and the selected path needs complete data.
     #[error(
         "the track table has missing entries ({observed} of {total} observations present); \
@@ -77,7 +83,10 @@ pub enum Error {
     Degenerate(String),
     /// A numerical routine failed in a way that is not the user's fault.
     #[error("numerical failure in {stage}: {message}")]
-    Numerical { stage: &'static str, message: String },
+    Numerical {
+        stage: &'static str,
+        message: String,
+    },
 }
 
 fn source_suffix(path: &Option<PathBuf>) -> String {

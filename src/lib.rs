@@ -12,15 +12,19 @@
 //! orthography: a factorization method", IJCV 9(2), 1992; C. J. Poelman and T. Kanade,
 //! "A paraperspective factorization method for shape and motion recovery", PAMI 19(3), 1997.
 
+#![allow(clippy::needless_range_loop)]
+
 pub mod camera;
 pub mod datasets;
 pub mod error;
 pub mod measurements;
 pub mod observer;
 pub mod solver;
+pub mod tracks;
 
 pub use camera::{CameraModel, MetricModel};
 pub use error::{Error, Result};
 pub use measurements::Measurements;
 pub use observer::{Event, NoopObserver, Observer};
 pub use solver::{SolverReport, SolverStatus};
+pub use tracks::{Id, TrackTable};

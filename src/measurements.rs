@@ -23,7 +23,10 @@ impl Measurements {
     /// # Panics
     /// If the shapes disagree (a programming error, not user input).
     pub fn new(mut w: Mat<f64>, visible: Vec<bool>) -> Self {
-        assert!(w.nrows() % 2 == 0, "W must have an even number of rows");
+        assert!(
+            w.nrows().is_multiple_of(2),
+            "W must have an even number of rows"
+        );
         let (f, n) = (w.nrows() / 2, w.ncols());
         assert_eq!(visible.len(), f * n, "mask must be F×N");
         for fi in 0..f {
@@ -91,6 +94,10 @@ impl Measurements {
             }
             count += 2;
         }
-        if count == 0 { 0.0 } else { (ss / count as f64).sqrt() }
+        if count == 0 {
+            0.0
+        } else {
+            (ss / count as f64).sqrt()
+        }
     }
 }

@@ -1,0 +1,237 @@
+//! Dense measurement matrix text format (`.txt`).
+//!
+//! 2F rows × N columns, row `2f` = x and row `2f+1` = y of frame `f`, whitespace-separated
+//! numbers, `nan` (any case) for a missing observation, `#` starts a comment line, blank
+//! lines are skipped. Frame ids are `0..F` and track ids `0..N` (0-based positions). This
+//! is the layout of the Oxford and CMU measurement matrices (`M_dense.txt`).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::{Id, TrackTable};
+use crate::{Error, Result};
+
+/// Parses dense text; `path` is used in error messages.
+pub fn parse(text: &str, path: &Path) -> Result<TrackTable> {
+    // (line number, values)
+    let mut rows: Vec<(usize, Vec<f64>)> = Vec::new();
+    let mut width: Option<(usize, usize)> = None; // (columns, line where first seen)
+    for (li, raw) in text.lines().enumerate() {
+        let line_no = li + 1;
+        let line = raw.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let row_index = rows.len();
+        let mut vals = Vec::new();
+        for (c, tok) in line.split_whitespace().enumerate() {
+            let v = if tok.eq_ignore_ascii_case("nan") {
+                f64::NAN
+            } else {
+                match tok.parse::<f64>() {
+                    Ok(v) if v.is_finite() => v,
+                    Ok(_) => {
+                        return Err(Error::parse(
+                            path,
+                            line_no,
+                            format!("row {row_index} column {c}"),
+                            format!("value `{tok}` is not finite (use `nan` for missing)"),
+                        ));
+                    }
+                    Err(_) => {
+                        return Err(Error::parse(
+                            path,
+                            line_no,
+                            format!("row {row_index} column {c}"),
+                            format!("`{tok}` is not a number"),
+                        ));
+                    }
+                }
+            };
+            vals.push(v);
+        }
+        match width {
+            None => width = Some((vals.len(), line_no)),
+            Some((w, first)) if w != vals.len() => {
+                return Err(Error::parse(
+                    path,
+                    line_no,
+                    format!("row {row_index}"),
+                    format!(
+                        "ragged row: {} values, but line {first} has {w}",
+                        vals.len()
+                    ),
+                ));
+            }
+            _ => {}
+        }
+        rows.push((line_no, vals));
+    }
+    if rows.is_empty() {
+        return Err(Error::EmptyTable {
+            path: Some(path.to_path_buf()),
+            reason: "no data rows".into(),
+        });
+    }
+    if !rows.len().is_multiple_of(2) {
+        let (line, _) = rows[rows.len() - 1];
+        return Err(Error::parse(
+            path,
+            line,
+            format!("row {}", rows.len() - 1),
+            format!(
+                "{} rows: a measurement matrix needs an even number (x and y per frame); the \
+                 last frame has x without y",
+                rows.len()
+            ),
+        ));
+    }
+    let f = rows.len() / 2;
+    let n = rows[0].1.len();
+    let mut t = TrackTable::new(
+        (0..f).map(Id::from).collect(),
+        (0..n).map(Id::from).collect(),
+    );
+    for fi in 0..f {
+        let (lx, xs) = &rows[2 * fi];
+        let (ly, ys) = &rows[2 * fi + 1];
+        for p in 0..n {
+            match (xs[p].is_nan(), ys[p].is_nan()) {
+                (false, false) => t.set(fi, p, xs[p], ys[p]),
+                (true, true) => {}
+                (false, true) => {
+                    return Err(Error::parse(
+                        path,
+                        *ly,
+                        format!("row {} column {p}", 2 * fi + 1),
+                        format!("frame {fi} track {p}: x given without y"),
+                    ));
+                }
+                (true, false) => {
+                    return Err(Error::parse(
+                        path,
+                        *lx,
+                        format!("row {} column {p}", 2 * fi),
+                        format!("frame {fi} track {p}: y given without x"),
+                    ));
+                }
+            }
+        }
+    }
+    if t.n_observed() == 0 {
+        return Err(Error::EmptyTable {
+            path: Some(path.to_path_buf()),
+            reason: "every entry is nan".into(),
+        });
+    }
+    Ok(t)
+}
+
+/// Writes a table as a dense matrix (`nan` for missing), with comment lines naming the ids.
+pub fn to_string(t: &TrackTable) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "# rank3 dense measurement matrix: {} rows (x, y per frame) x {} tracks; nan = missing",
+        2 * t.n_frames(),
+        t.n_tracks()
+    );
+    let ids = |v: &[Id]| {
+        v.iter()
+            .map(|i| i.to_string())
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let _ = writeln!(s, "# frames: {}", ids(t.frame_ids()));
+    let _ = writeln!(s, "# tracks: {}", ids(t.track_ids()));
+    write_matrix(&mut s, 2 * t.n_frames(), t.n_tracks(), |r, p| {
+        t.get(r / 2, p).map_or(f64::NAN, |xy| xy[r % 2])
+    });
+    s
+}
+
+/// Appends a rows×cols matrix, one row per line, `nan` for NaN, shortest exact decimal.
+pub(crate) fn write_matrix(
+    s: &mut String,
+    rows: usize,
+    cols: usize,
+    value: impl Fn(usize, usize) -> f64,
+) {
+    for r in 0..rows {
+        for c in 0..cols {
+            if c > 0 {
+                s.push(' ');
+            }
+            let v = value(r, c);
+            if v.is_nan() {
+                s.push_str("nan");
+            } else {
+                let _ = write!(s, "{v}");
+            }
+        }
+        s.push('\n');
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p() -> &'static Path {
+        Path::new("m.txt")
+    }
+
+    #[test]
+    fn parses_comments_nan_and_roundtrips() {
+        let txt = "# c\n1 2 nan\n3 4 nan\n\n5 6 7\n8 9 10\n";
+        let t = parse(txt, p()).unwrap();
+        assert_eq!((t.n_frames(), t.n_tracks()), (2, 3));
+        assert_eq!(t.get(0, 1), Some([2.0, 4.0]));
+        assert_eq!(t.get(0, 2), None);
+        assert_eq!(t.get(1, 2), Some([7.0, 10.0]));
+        let back = parse(&to_string(&t), p()).unwrap();
+        assert_eq!(back, t);
+    }
+
+    fn err(txt: &str) -> (usize, String, String) {
+        match parse(txt, p()).unwrap_err() {
+            Error::Parse {
+                line,
+                field,
+                message,
+                ..
+            } => (line, field, message),
+            e => panic!("unexpected {e}"),
+        }
+    }
+
+    #[test]
+    fn errors_name_line_and_field() {
+        let (l, f, m) = err("1 2\n3 x\n");
+        assert_eq!((l, f.as_str()), (2, "row 1 column 1"));
+        assert!(m.contains("not a number"));
+        let (l, _, m) = err("1 2\n3 inf\n");
+        assert_eq!(l, 2);
+        assert!(m.contains("not finite"));
+        let (l, f, m) = err("# h\n1 2\n3 4 5\n");
+        assert_eq!((l, f.as_str()), (3, "row 1"));
+        assert!(m.contains("ragged"));
+        let (l, _, m) = err("1 2\nnan 4\n");
+        assert_eq!(l, 2);
+        assert!(m.contains("x given without y"));
+        let (l, _, m) = err("nan 2\n3 4\n");
+        assert_eq!(l, 1);
+        assert!(m.contains("y given without x"));
+        let (l, _, m) = err("1 2\n3 4\n5 6\n");
+        assert_eq!(l, 3);
+        assert!(m.contains("even number"));
+        assert!(matches!(
+            parse("# only comments\n", p()),
+            Err(Error::EmptyTable { .. })
+        ));
+        assert!(matches!(
+            parse("nan nan\nnan nan\n", p()),
+            Err(Error::EmptyTable { .. })
+        ));
+    }
+}
