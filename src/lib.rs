@@ -12,19 +12,32 @@
 //! orthography: a factorization method", IJCV 9(2), 1992; C. J. Poelman and T. Kanade,
 //! "A paraperspective factorization method for shape and motion recovery", PAMI 19(3), 1997.
 
-#![allow(clippy::needless_range_loop)]
+// Numeric code: index loops mirror the math, and `!(a > b)` is the NaN-safe comparison.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
+#[cfg(feature = "builtin-lapack")]
+mod lapack_shim;
 
 pub mod camera;
 pub mod datasets;
 pub mod error;
+pub mod eval;
 pub mod measurements;
+pub mod metric;
 pub mod observer;
+pub mod output;
+pub mod reconstruction;
+pub mod refine;
+pub mod sdp;
 pub mod solver;
+pub mod svd;
+pub mod synth;
 pub mod tracks;
 
 pub use camera::{CameraModel, MetricModel};
 pub use error::{Error, Result};
 pub use measurements::Measurements;
 pub use observer::{Event, NoopObserver, Observer};
+pub use reconstruction::{Config, Reconstruction};
 pub use solver::{SolverReport, SolverStatus};
 pub use tracks::{Id, TrackTable};

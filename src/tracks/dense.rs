@@ -127,6 +127,113 @@ pub fn parse(text: &str, path: &Path) -> Result<TrackTable> {
     Ok(t)
 }
 
+/// Parses a pair of F×N matrices, one of x and one of y coordinates (frames as rows,
+/// tracks as columns, `nan` for missing, `#` comments) — the layout of the CMU hotel
+/// reference tracks (`tracked_points_Xs.txt`, `tracked_points_Ys.txt`).
+pub fn parse_xy(xs: &str, xs_path: &Path, ys: &str, ys_path: &Path) -> Result<TrackTable> {
+    let rows = |text: &str, path: &Path| -> Result<Vec<(usize, Vec<f64>)>> {
+        let mut out: Vec<(usize, Vec<f64>)> = Vec::new();
+        for (li, raw) in text.lines().enumerate() {
+            let line = raw.trim();
+            if line.is_empty() || line.starts_with('#') {
+                continue;
+            }
+            let mut vals = Vec::new();
+            for (c, tok) in line.split_whitespace().enumerate() {
+                let field = || format!("row {} column {c}", out.len());
+                if tok.eq_ignore_ascii_case("nan") {
+                    vals.push(f64::NAN);
+                    continue;
+                }
+                match tok.parse::<f64>() {
+                    Ok(v) if v.is_finite() => vals.push(v),
+                    _ => {
+                        return Err(Error::parse(
+                            path,
+                            li + 1,
+                            field(),
+                            format!("`{tok}` is not a finite number"),
+                        ));
+                    }
+                }
+            }
+            if let Some((first, r)) = out.first()
+                && r.len() != vals.len()
+            {
+                return Err(Error::parse(
+                    path,
+                    li + 1,
+                    format!("row {}", out.len()),
+                    format!(
+                        "ragged row: {} values, but line {first} has {}",
+                        vals.len(),
+                        r.len()
+                    ),
+                ));
+            }
+            out.push((li + 1, vals));
+        }
+        Ok(out)
+    };
+    let (rx, ry) = (rows(xs, xs_path)?, rows(ys, ys_path)?);
+    let shape = |r: &Vec<(usize, Vec<f64>)>| (r.len(), r.first().map_or(0, |x| x.1.len()));
+    if shape(&rx) != shape(&ry) {
+        return Err(Error::Dimension {
+            context: "x and y matrices",
+            expected: format!(
+                "{:?} (frames, tracks) as in {}",
+                shape(&rx),
+                xs_path.display()
+            ),
+            got: format!("{:?} in {}", shape(&ry), ys_path.display()),
+        });
+    }
+    let (f, n) = shape(&rx);
+    if f == 0 || n == 0 {
+        return Err(Error::EmptyTable {
+            path: Some(xs_path.to_path_buf()),
+            reason: "no data rows".into(),
+        });
+    }
+    let mut t = TrackTable::new(
+        (0..f).map(Id::from).collect(),
+        (0..n).map(Id::from).collect(),
+    );
+    for fi in 0..f {
+        for p in 0..n {
+            let (x, y) = (rx[fi].1[p], ry[fi].1[p]);
+            match (x.is_nan(), y.is_nan()) {
+                (false, false) => t.set(fi, p, x, y),
+                (true, true) => {}
+                (false, true) => {
+                    return Err(Error::parse(
+                        ys_path,
+                        ry[fi].0,
+                        format!("row {fi} column {p}"),
+                        "x given without y",
+                    ));
+                }
+                (true, false) => {
+                    return Err(Error::parse(
+                        xs_path,
+                        rx[fi].0,
+                        format!("row {fi} column {p}"),
+                        "y given without x",
+                    ));
+                }
+            }
+        }
+    }
+    Ok(t)
+}
+
+/// Reads an x/y matrix pair (see [`parse_xy`]).
+pub fn read_xy(xs_path: &Path, ys_path: &Path) -> Result<TrackTable> {
+    let xs = std::fs::read_to_string(xs_path).map_err(|e| Error::io(xs_path, e))?;
+    let ys = std::fs::read_to_string(ys_path).map_err(|e| Error::io(ys_path, e))?;
+    parse_xy(&xs, xs_path, &ys, ys_path)
+}
+
 /// Writes a table as a dense matrix (`nan` for missing), with comment lines naming the ids.
 pub fn to_string(t: &TrackTable) -> String {
     let mut s = String::new();
@@ -203,6 +310,21 @@ mod tests {
             } => (line, field, message),
             e => panic!("unexpected {e}"),
         }
+    }
+
+    #[test]
+    fn xy_pair() {
+        let t = parse_xy("# x\n1 2\n3 nan\n", p(), "10 20\n30 nan\n", p()).unwrap();
+        assert_eq!(t.get(1, 0), Some([3.0, 30.0]));
+        assert_eq!(t.get(1, 1), None);
+        assert!(matches!(
+            parse_xy("1 2\n", p(), "1 2\n3 4\n", p()),
+            Err(Error::Dimension { .. })
+        ));
+        assert!(matches!(
+            parse_xy("1 2\n", p(), "1 nan\n", p()),
+            Err(Error::Parse { line: 1, .. })
+        ));
     }
 
     #[test]
