@@ -19,6 +19,7 @@
 mod lapack_shim;
 
 pub mod camera;
+pub mod completion;
 pub mod datasets;
 pub mod error;
 pub mod eval;
@@ -28,6 +29,7 @@ pub mod observer;
 pub mod output;
 pub mod reconstruction;
 pub mod refine;
+pub mod robust;
 pub mod sdp;
 pub mod solver;
 pub mod svd;
