@@ -1,0 +1,768 @@
+//! Robust factorization: rejection of outlier tracks and of gross per-entry errors.
+//!
+//! Trackers make two kinds of mistakes: a whole track follows the wrong thing (slides
+//! along an edge, jumps to another object, belongs to an independently moving object), and
+//! a good track has a few gross errors. [`robust_filter`] finds both:
+//!
+//! 1. **Outlier tracks**: RANSAC/MSAC with LO-RANSAC local optimization ([`ransac`]) over
+//!    the tracks, with the affine-subspace track estimator ([`subspace::TrackSubspace`]):
+//!    rigid trajectories span a 3-dimensional affine subspace of R^{2F}; a minimal sample
+//!    of 4 tracks is a hypothesis, a track's residual is its trimmed RMS distance to the
+//!    subspace over the frames it shares with it. Works with missing data (overlap-aware
+//!    sampling, unscored tracks cost as outliers, refit by an affine factorization over
+//!    all frames).
+//! 2. **Noise level**: unless `ransac.threshold_px` is given, `σ` is estimated robustly
+//!    (least-quantile bootstrap, then the fixed point `σ = median{r ≤ κσ}`) and the track
+//!    threshold is `τ = κσ`, `κ = sqrt(χ²_ν(p)/ν)` (see [`subspace`]).
+//! 3. **Gross entries and final classification**: the model is refitted on the RANSAC
+//!    inliers; the entry noise `σ_e` is the median entry distance / sqrt(2 ln 2) (each
+//!    distance scaled by `1/sqrt(1 − 3/(2k))` for the track's 3 fitted coordinates); entries
+//!    farther than `entry_threshold_px` (default `sqrt(χ²₂(entry_probability)) · σ_e`,
+//!    4.29 σ_e for p = 0.9999) from their track's fit are flagged (each track is refitted on
+//!    its entries within the threshold; when more than `max_flagged_fraction` would be
+//!    flagged, a per-track RANSAC over frame pairs looks for a better start). A track is an
+//!    inlier when its unflagged RMS `r` over `k` frames passes the χ² test
+//!    `r ≤ σ_e sqrt(χ²_ν(track_probability)/ν)`, `ν = 2k − 3` (or `r ≤ threshold_px` when
+//!    given), and at most `max_flagged_fraction` of its entries are flagged. The model is
+//!    refitted without the flagged entries and this is repeated until nothing changes (at
+//!    most `max_gross_rounds`).
+//! 4. **Verdict**: a rigid majority exists when the inlier fraction is at least
+//!    `min_inlier_fraction` and no *rival* rigid group (a second RANSAC over the rejected
+//!    tracks, same threshold) has at least `max_rival_ratio` times as many tracks. Otherwise
+//!    [`Verdict::NoRigidMajority`] is returned with the numbers, and no model or inlier set
+//!    is claimed.
+//!
+//! References: M. A. Fischler and R. C. Bolles, "Random sample consensus", CACM 24(6),
+//! 1981; P. H. S. Torr and A. Zisserman, "MLESAC: a new robust estimator with application
+//! to estimating image geometry", CVIU 78(1), 2000 (MSAC cost); O. Chum, J. Matas and
+//! J. Kittler, "Locally optimized RANSAC", DAGM 2003; P. J. Rousseeuw, "Least median of
+//! squares regression", JASA 79, 1984; C. Tomasi and T. Kanade, IJCV 9(2), 1992.
+//!
+//! Complexity: O(I · #observations) for I RANSAC hypotheses (I adaptive, ≤
+//! `max_iterations`; with missing data add O(I · N · F/64) for sampling), plus a few
+//! affine refits (O(F·N·3) SVD for complete data, O(#observations) per ALS sweep), plus
+//! the rival search (same order, on the rejected tracks only, and only when they are
+//! numerous enough to matter).
+
+// `!(x > y)` is used on purpose: it is true for NaN, which must take the safe branch.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+pub mod ransac;
+pub mod subspace;
+
+use rand::Rng;
+use serde::Serialize;
+
+pub use ransac::{Estimator, RansacConfig, RansacResult, RansacStatus, ransac, ransac_observed};
+pub use subspace::{AffineSubspace, SubspaceConfig, TrackFit, TrackSubspace};
+
+use crate::{Error, Measurements, NoopObserver, Observer, Result};
+
+/// Settings of [`robust_filter`]. Every field has a documented default.
+#[derive(Debug, Clone)]
+pub struct RobustConfig {
+    /// RANSAC settings (threshold `None` = estimate the noise; confidence 0.999; 50–2000
+    /// hypotheses; LO on).
+    pub ransac: RansacConfig,
+    /// Track estimator settings.
+    pub subspace: SubspaceConfig,
+    /// Per-entry gross-error threshold, pixels (distance in the image). `None` (default):
+    /// `sqrt(χ²₂(entry_probability)) · σ_e`.
+    pub entry_threshold_px: Option<f64>,
+    /// Probability that a good entry is below the estimated entry threshold. Default 0.9999.
+    pub entry_probability: f64,
+    /// Final per-track test (after the refit, with the entry-level `σ`): a track whose
+    /// unflagged entries have RMS `r` over `k` frames is an inlier when
+    /// `r ≤ σ sqrt(χ²_ν(track_probability)/ν)`, `ν = 2k − 3` (or `r ≤ threshold_px` when the
+    /// RANSAC threshold is given). Default 0.9999.
+    pub track_probability: f64,
+    /// Rounds of flag → refit → re-classify. Default 5.
+    pub max_gross_rounds: usize,
+    /// A track with more than this fraction of its entries flagged is an outlier track.
+    /// Default 0.3.
+    pub max_flagged_fraction: f64,
+    /// Below this inlier fraction there is no rigid majority. Default 0.4.
+    pub min_inlier_fraction: f64,
+    /// A rival rigid group among the rejected tracks with at least this many tracks
+    /// relative to the inliers means there is no (unambiguous) rigid majority. Default 0.6.
+    pub max_rival_ratio: f64,
+    /// Rigidity sanity check: a group whose noise estimate `σ` exceeds this fraction of
+    /// the observations' RMS distance to their frame centroid is not a rigid fit (a
+    /// rank-3 subspace explains any set of tracks at a large enough scale): the verdict is
+    /// then [`NoMajorityReason::NoiseTooLarge`]. Default 0.01.
+    pub max_relative_noise: f64,
+    /// Run the rival search. Default true.
+    pub rival_search: bool,
+    /// RANSAC hypotheses of the rival search at most. Default 300.
+    pub rival_max_iterations: usize,
+}
+
+impl Default for RobustConfig {
+    fn default() -> Self {
+        Self {
+            ransac: RansacConfig::default(),
+            subspace: SubspaceConfig::default(),
+            entry_threshold_px: None,
+            entry_probability: 0.9999,
+            track_probability: 0.9999,
+            max_gross_rounds: 5,
+            max_flagged_fraction: 0.3,
+            min_inlier_fraction: 0.4,
+            max_rival_ratio: 0.6,
+            max_relative_noise: 0.01,
+            rival_search: true,
+            rival_max_iterations: 300,
+        }
+    }
+}
+
+impl RobustConfig {
+    fn validate(&self) -> Result<()> {
+        self.ransac.validate()?;
+        let bad =
+            |field: &'static str, message: String| Err(Error::InvalidConfig { field, message });
+        let s = &self.subspace;
+        if s.min_overlap < 3 {
+            return bad(
+                "subspace.min_overlap",
+                format!("{} < 3 frames cannot test a track", s.min_overlap),
+            );
+        }
+        if !(0.0..0.5).contains(&s.trim_fraction) {
+            return bad(
+                "subspace.trim_fraction",
+                format!("{} is not in [0, 0.5)", s.trim_fraction),
+            );
+        }
+        if !(s.min_sample_condition >= 0.0 && s.min_sample_condition < 1.0) {
+            return bad(
+                "subspace.min_sample_condition",
+                format!("{} is not in [0, 1)", s.min_sample_condition),
+            );
+        }
+        if let Some(t) = self.entry_threshold_px
+            && !(t > 0.0 && t.is_finite())
+        {
+            return bad("entry_threshold_px", format!("{t} is not positive"));
+        }
+        if !(self.entry_probability > 0.5 && self.entry_probability < 1.0) {
+            return bad(
+                "entry_probability",
+                format!("{} is not in (0.5, 1)", self.entry_probability),
+            );
+        }
+        if !(self.track_probability > 0.5 && self.track_probability < 1.0) {
+            return bad(
+                "track_probability",
+                format!("{} is not in (0.5, 1)", self.track_probability),
+            );
+        }
+        if !(0.0..=1.0).contains(&self.max_flagged_fraction) {
+            return bad(
+                "max_flagged_fraction",
+                format!("{} is not in [0, 1]", self.max_flagged_fraction),
+            );
+        }
+        if !(0.0..=1.0).contains(&self.min_inlier_fraction) {
+            return bad(
+                "min_inlier_fraction",
+                format!("{} is not in [0, 1]", self.min_inlier_fraction),
+            );
+        }
+        if !(self.max_rival_ratio > 0.0) {
+            return bad(
+                "max_rival_ratio",
+                format!("{} is not positive", self.max_rival_ratio),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Why no rigid majority was found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NoMajorityReason {
+    /// No non-degenerate 4-track sample could be drawn or fitted.
+    NoHypothesis,
+    /// The best rigid group is smaller than `min_inlier_fraction` of the tracks.
+    TooFewInliers,
+    /// Another rigid group of comparable size exists among the rejected tracks.
+    RivalGroup,
+    /// The best group's noise estimate is too large relative to the image spread of the
+    /// tracks (`max_relative_noise`): it is not a rigid fit.
+    NoiseTooLarge,
+}
+
+/// Whether the tracks contain one dominant rigid motion.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "kebab-case", tag = "verdict")]
+pub enum Verdict {
+    /// One rigid group explains `inlier_fraction` of the tracks; the largest rival group
+    /// found among the rest has `rival_fraction` (0 when the search did not run).
+    RigidMajority {
+        inlier_fraction: f64,
+        rival_fraction: f64,
+    },
+    /// No unambiguous rigid majority: the result claims no model and no inliers.
+    NoRigidMajority {
+        reason: NoMajorityReason,
+        /// Fraction of tracks in the best rigid group found.
+        inlier_fraction: f64,
+        /// Fraction of tracks in the best rival group (0 when not searched).
+        rival_fraction: f64,
+        /// The configured floor.
+        min_inlier_fraction: f64,
+    },
+}
+
+impl Verdict {
+    /// True for [`Verdict::RigidMajority`].
+    pub fn is_rigid_majority(&self) -> bool {
+        matches!(self, Verdict::RigidMajority { .. })
+    }
+}
+
+/// Result of [`robust_filter`].
+#[derive(Debug, Clone)]
+pub struct RobustResult {
+    pub verdict: Verdict,
+    /// Inlier flag per track (all false with [`Verdict::NoRigidMajority`]).
+    pub inlier_tracks: Vec<bool>,
+    /// Gross entries of inlier tracks, (frame, track), sorted (empty without a majority).
+    pub flagged_entries: Vec<(usize, usize)>,
+    /// Image noise σ per coordinate, pixels (robust estimate from the inlier entries).
+    pub noise_sigma: f64,
+    /// Track threshold `τ` on the trimmed RMS residual, pixels.
+    pub threshold_px: f64,
+    /// Entry threshold on the image distance, pixels.
+    pub entry_threshold_px: f64,
+    /// RANSAC hypotheses drawn (MSAC phase + scale bootstrap).
+    pub iterations: usize,
+    /// MSAC cost of the RANSAC model.
+    pub score: f64,
+    /// Per-track residual under the final model (`None`: cannot be scored).
+    pub track_residuals: Vec<Option<f64>>,
+    /// Affine coordinates of the inlier tracks under `model` (`None` for others).
+    pub coordinates: Vec<Option<[f64; 3]>>,
+    /// The final affine model (refit on the inliers without the flagged entries); `None`
+    /// without a majority.
+    pub model: Option<AffineSubspace>,
+    /// The best rigid group found, whatever the verdict (diagnostics only).
+    pub candidate_tracks: Vec<bool>,
+    /// Tracks in the best rival group (0 when the search did not run).
+    pub rival_tracks: usize,
+    /// Flag/refit rounds run.
+    pub gross_rounds: usize,
+    /// The RANSAC run over the tracks.
+    pub ransac: RansacResult<AffineSubspace>,
+}
+
+impl RobustResult {
+    /// Number of inlier tracks.
+    pub fn n_inliers(&self) -> usize {
+        self.inlier_tracks.iter().filter(|&&b| b).count()
+    }
+}
+
+/// Upper-tail quantile of the standard normal: `z` with `Φ(z) = p`, by bisection on
+/// `Φ(z) = erfc(−z/√2)/2` (erfc by Abramowitz & Stegun 7.1.26, |error| < 1.5e-7).
+pub fn normal_quantile(p: f64) -> f64 {
+    let erfc = |x: f64| -> f64 {
+        let s = x.signum();
+        let x = x.abs();
+        let t = 1.0 / (1.0 + 0.327_591_1 * x);
+        let poly = t
+            * (0.254_829_592
+                + t * (-0.284_496_736
+                    + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+        let erf = 1.0 - poly * (-x * x).exp();
+        1.0 - s * erf
+    };
+    let phi = |z: f64| 0.5 * erfc(-z / std::f64::consts::SQRT_2);
+    let (mut lo, mut hi) = (-10.0, 10.0);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if phi(mid) < p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// Quantile `χ²_ν(p)`: exact for ν = 2 (`−2 ln(1 − p)`) and ν = 1 (`z²_{(1+p)/2}`),
+/// Wilson–Hilferty otherwise: `ν (1 − 2/(9ν) + z_p sqrt(2/(9ν)))³`.
+pub fn chi2_quantile(nu: f64, p: f64) -> f64 {
+    if (nu - 2.0).abs() < 1e-12 {
+        return -2.0 * (1.0 - p).ln();
+    }
+    if (nu - 1.0).abs() < 1e-12 {
+        let z = normal_quantile(0.5 * (1.0 + p));
+        return z * z;
+    }
+    let a = 2.0 / (9.0 * nu);
+    let z = normal_quantile(p);
+    nu * (1.0 - a + z * a.sqrt()).powi(3).max(0.0)
+}
+
+/// [`robust_filter_observed`] without an observer.
+pub fn robust_filter<R: Rng + ?Sized>(
+    meas: &Measurements,
+    config: &RobustConfig,
+    rng: &mut R,
+) -> Result<RobustResult> {
+    robust_filter_observed(meas, config, rng, &mut NoopObserver)
+}
+
+/// Rejects outlier tracks and flags gross entries; see the module documentation.
+///
+/// Observer: `Event::Iteration` with `solver: "ransac-scale"` / `"ransac"` (run 0: the main
+/// search; run 1: the rival search), `cost` = best MSAC cost (or residual quantile),
+/// `lambda` = best inlier count, `rms` = NaN.
+///
+/// Errors: invalid configuration; fewer than 3 frames, fewer than 8 tracks, or fewer than
+/// 4 tracks seen in `min_overlap` frames ([`Error::TooFew`]).
+pub fn robust_filter_observed<R: Rng + ?Sized>(
+    meas: &Measurements,
+    config: &RobustConfig,
+    rng: &mut R,
+    observer: &mut dyn Observer,
+) -> Result<RobustResult> {
+    config.validate()?;
+    let (nf, n) = (meas.n_frames(), meas.n_points());
+    if nf < 3 {
+        return Err(Error::TooFew {
+            what: "frames for robust track rejection",
+            needed: 3,
+            have: nf,
+        });
+    }
+    if n < 8 {
+        return Err(Error::TooFew {
+            what: "tracks for robust track rejection",
+            needed: 8,
+            have: n,
+        });
+    }
+    let est = TrackSubspace::new(meas, &config.subspace);
+    if est.n_eligible() < 4 {
+        return Err(Error::TooFew {
+            what: "tracks seen in at least `min_overlap` frames",
+            needed: 4,
+            have: est.n_eligible(),
+        });
+    }
+    let rr = ransac_observed(&est, n, &config.ransac, rng, observer, 0)?;
+    let iterations = rr.iterations + rr.scale_iterations;
+    let Some(ransac_model) = rr.model.clone() else {
+        return Ok(no_majority(
+            NoMajorityReason::NoHypothesis,
+            n,
+            config,
+            rr,
+            f64::NAN,
+        ));
+    };
+    let tau = rr.threshold;
+    let frac = |k: usize| k as f64 / n as f64;
+
+    // Final refit on the RANSAC inliers, then flag → refit → re-classify.
+    let mut inl: Vec<usize> = (0..n).filter(|&p| rr.inliers[p]).collect();
+    let mut model = est
+        .refit_with(&ransac_model, &inl, config.subspace.final_als_iterations)
+        .unwrap_or(ransac_model);
+    let mut flagged: Vec<(usize, usize)> = Vec::new();
+    let mut cur = est.clone();
+    let mut sigma_e = f64::NAN;
+    let mut rounds = 0;
+    let entry_k = chi2_quantile(2.0, config.entry_probability).sqrt();
+    // Noise floor for noise-free input (keeps thresholds positive).
+    let floor = 1e-9 * meas.w.norm_max().max(1.0);
+    let (fits, entry_thr) = loop {
+        // Robust entry scale from the inlier tracks' entries: first from the trimmed fits
+        // (biased low: trimming keeps the best frames), then from the threshold-based fits;
+        // each distance scaled by 1/sqrt(1 − 3/(2k)) for the 3 coordinates fitted from k
+        // frames; σ_e = median / sqrt(2 ln 2).
+        let scale_of = |fits: &[Option<[f64; 3]>]| -> Option<f64> {
+            let mut d: Vec<f64> = Vec::new();
+            for &p in &inl {
+                let Some(s) = &fits[p] else { continue };
+                let k = est
+                    .frames_of(p)
+                    .iter()
+                    .filter(|&&f| model.defined[f as usize])
+                    .count() as f64;
+                let lev = (1.0 - 3.0 / (2.0 * k)).max(0.1).sqrt();
+                for &fr in est.frames_of(p) {
+                    if model.defined[fr as usize] {
+                        d.push(est.dist2(&model, p, fr as usize, s).sqrt() / lev);
+                    }
+                }
+            }
+            (!d.is_empty()).then(|| (crate::eval::median(&d) / 1.177_410_022_515_474_8).max(floor))
+        };
+        let trimmed: Vec<Option<[f64; 3]>> = (0..n)
+            .map(|p| cur.track_fit(&model, p).map(|f| f.s))
+            .collect();
+        if let Some(sg) = scale_of(&trimmed) {
+            sigma_e = sg;
+        }
+        let thr0 = config.entry_threshold_px.unwrap_or(entry_k * sigma_e);
+        let fits0: Vec<Option<[f64; 3]>> = (0..n)
+            .map(|p| {
+                entry_fit(&est, &cur, &model, p, thr0, config.max_flagged_fraction).map(|f| f.s)
+            })
+            .collect();
+        if let Some(sg) = scale_of(&fits0) {
+            sigma_e = sg;
+        }
+        let entry_thr = config.entry_threshold_px.unwrap_or(entry_k * sigma_e);
+        let fits: Vec<Option<EntryFit>> = (0..n)
+            .map(|p| {
+                entry_fit(
+                    &est,
+                    &cur,
+                    &model,
+                    p,
+                    entry_thr,
+                    config.max_flagged_fraction,
+                )
+            })
+            .collect();
+        let mut new_flags = Vec::new();
+        let mut new_inl = Vec::new();
+        for (p, fit) in fits.iter().enumerate() {
+            let Some(fit) = fit else { continue };
+            let limit = match config.ransac.threshold_px {
+                Some(t) => t,
+                None => {
+                    let nu = (2 * fit.kept) as f64 - 3.0;
+                    sigma_e * (chi2_quantile(nu, config.track_probability) / nu).sqrt()
+                }
+            };
+            if fit.rms > limit
+                || fit.flagged.len() as f64 > config.max_flagged_fraction * fit.seen as f64
+            {
+                continue;
+            }
+            new_inl.push(p);
+            new_flags.extend(fit.flagged.iter().map(|&f| (f, p)));
+        }
+        new_flags.sort_unstable();
+        let changed = new_flags != flagged || new_inl != inl;
+        flagged = new_flags;
+        inl = new_inl;
+        if !changed || rounds >= config.max_gross_rounds || inl.len() < 4 {
+            break (fits, entry_thr);
+        }
+        rounds += 1;
+        cur = TrackSubspace::with_exclusions(meas, &config.subspace, &flagged);
+        if let Some(m) = cur.refit_with(&model, &inl, config.subspace.final_als_iterations) {
+            model = m;
+        }
+    };
+    let residuals: Vec<Option<f64>> = fits.iter().map(|f| f.as_ref().map(|f| f.rms)).collect();
+    let mut inlier_tracks = vec![false; n];
+    for &p in &inl {
+        inlier_tracks[p] = true;
+    }
+    let n_in = inl.len();
+
+    // Rival search among the rejected, scorable tracks.
+    let mut rival = 0usize;
+    let rejected: Vec<usize> = (0..n)
+        .filter(|&p| !inlier_tracks[p] && est.frames_of(p).len() >= est.min_overlap())
+        .collect();
+    if config.rival_search
+        && rejected.len() >= 8
+        && rejected.len() as f64 >= config.max_rival_ratio * n_in as f64
+    {
+        let sub = select_columns(meas, &rejected);
+        let rest = TrackSubspace::new(&sub, &config.subspace);
+        let rc = RansacConfig {
+            threshold_px: Some(tau),
+            max_iterations: config.rival_max_iterations,
+            min_iterations: config
+                .ransac
+                .min_iterations
+                .min(config.rival_max_iterations),
+            ..config.ransac.clone()
+        };
+        if rest.n_eligible() >= 4
+            && let Ok(r2) = ransac_observed(&rest, rejected.len(), &rc, rng, observer, 1)
+        {
+            rival = r2.n_inliers;
+        }
+    }
+
+    let candidate_tracks = inlier_tracks.clone();
+    let spread = observation_spread(meas);
+    let reason = if !(sigma_e <= config.max_relative_noise * spread) {
+        Some(NoMajorityReason::NoiseTooLarge)
+    } else if frac(n_in) < config.min_inlier_fraction {
+        Some(NoMajorityReason::TooFewInliers)
+    } else if rival as f64 >= config.max_rival_ratio * n_in as f64 {
+        Some(NoMajorityReason::RivalGroup)
+    } else {
+        None
+    };
+    if let Some(reason) = reason {
+        let mut out = no_majority(reason, n, config, rr, tau);
+        out.verdict = Verdict::NoRigidMajority {
+            reason,
+            inlier_fraction: frac(n_in),
+            rival_fraction: frac(rival),
+            min_inlier_fraction: config.min_inlier_fraction,
+        };
+        out.candidate_tracks = candidate_tracks;
+        out.rival_tracks = rival;
+        out.noise_sigma = sigma_e;
+        out.entry_threshold_px = entry_thr;
+        out.track_residuals = residuals;
+        out.gross_rounds = rounds;
+        out.iterations = iterations;
+        return Ok(out);
+    }
+    let coordinates = (0..n)
+        .map(|p| {
+            if inlier_tracks[p] {
+                fits[p].as_ref().map(|f| f.s)
+            } else {
+                None
+            }
+        })
+        .collect();
+    Ok(RobustResult {
+        verdict: Verdict::RigidMajority {
+            inlier_fraction: frac(n_in),
+            rival_fraction: frac(rival),
+        },
+        inlier_tracks,
+        flagged_entries: flagged,
+        noise_sigma: sigma_e,
+        threshold_px: tau,
+        entry_threshold_px: entry_thr,
+        iterations,
+        score: rr.score,
+        track_residuals: residuals,
+        coordinates,
+        model: Some(model),
+        candidate_tracks,
+        rival_tracks: rival,
+        gross_rounds: rounds,
+        ransac: rr,
+    })
+}
+
+/// A track's fit with its gross entries identified.
+struct EntryFit {
+    s: [f64; 3],
+    /// Per-coordinate RMS of the unflagged entries, corrected for the 3 coordinates.
+    rms: f64,
+    /// Frames whose entry is farther than the entry threshold.
+    flagged: Vec<usize>,
+    /// Unflagged frames.
+    kept: usize,
+    /// Observed frames where the model is defined.
+    seen: usize,
+}
+
+/// Starting from `s`, twice: keep the entries within `thr2` (squared), refit on them;
+/// then split the frames into kept and flagged.
+fn threshold_refit(
+    est: &TrackSubspace,
+    model: &AffineSubspace,
+    p: usize,
+    frames: &[u32],
+    mut s: [f64; 3],
+    thr2: f64,
+) -> Option<EntryFit> {
+    let mut good: Vec<u32> = Vec::with_capacity(frames.len());
+    for _ in 0..2 {
+        good.clear();
+        good.extend(
+            frames
+                .iter()
+                .copied()
+                .filter(|&f| est.dist2(model, p, f as usize, &s) <= thr2),
+        );
+        if good.len() < 2 {
+            break;
+        }
+        match est.ls_coords(model, p, &good) {
+            Some(s2) => s = s2,
+            None => break,
+        }
+    }
+    let mut flagged = Vec::new();
+    let mut ss = 0.0;
+    let mut kept = 0usize;
+    for &f in frames {
+        let d2 = est.dist2(model, p, f as usize, &s);
+        if d2 <= thr2 {
+            ss += d2;
+            kept += 1;
+        } else {
+            flagged.push(f as usize);
+        }
+    }
+    (kept >= 2).then(|| EntryFit {
+        s,
+        rms: (ss / ((2 * kept) as f64 - 3.0)).sqrt(),
+        flagged,
+        kept,
+        seen: frames.len(),
+    })
+}
+
+/// Fits track `p` to `model` with its gross entries set aside: start from the trimmed fit
+/// (`cur` excludes the entries flagged so far) and refit on the entries within `thr`
+/// ([`threshold_refit`]). When that leaves more than `max_flagged` of the entries flagged
+/// (the trimmed start was pulled by several gross entries), a per-track RANSAC over frame
+/// pairs (2 frames = 4 equations for the 3 coordinates; pairs `(i, i + k/3)` and
+/// `(i, i + k/2)`, O(k²)) looks for the largest set of consistent entries. `None` when the
+/// track cannot be scored.
+fn entry_fit(
+    est: &TrackSubspace,
+    cur: &TrackSubspace,
+    model: &AffineSubspace,
+    p: usize,
+    thr: f64,
+    max_flagged: f64,
+) -> Option<EntryFit> {
+    let start = cur.track_fit(model, p)?;
+    let frames: Vec<u32> = est
+        .frames_of(p)
+        .iter()
+        .copied()
+        .filter(|&f| model.defined[f as usize])
+        .collect();
+    let thr2 = thr * thr;
+    let first = threshold_refit(est, model, p, &frames, start.s, thr2);
+    let k = frames.len();
+    let acceptable = |e: &EntryFit| e.flagged.len() as f64 <= max_flagged * k as f64;
+    if first.as_ref().is_some_and(acceptable) || k < 4 {
+        return first;
+    }
+    let mut best: Option<(usize, [f64; 3])> = None;
+    for step in [k / 3, k / 2] {
+        if step == 0 {
+            continue;
+        }
+        for i in 0..k {
+            let pair = [frames[i], frames[(i + step) % k]];
+            if pair[0] == pair[1] {
+                continue;
+            }
+            let Some(s) = est.ls_coords(model, p, &pair) else {
+                continue;
+            };
+            let count = frames
+                .iter()
+                .filter(|&&f| est.dist2(model, p, f as usize, &s) <= thr2)
+                .count();
+            if best.is_none_or(|b| count > b.0) {
+                best = Some((count, s));
+            }
+        }
+    }
+    let second = best.and_then(|(_, s)| threshold_refit(est, model, p, &frames, s, thr2));
+    match (first, second) {
+        (Some(a), Some(b)) => Some(if b.kept > a.kept { b } else { a }),
+        (a, b) => a.or(b),
+    }
+}
+
+/// RMS distance of the observations to their frame's centroid (per coordinate), pixels.
+fn observation_spread(meas: &Measurements) -> f64 {
+    let (f, n) = (meas.n_frames(), meas.n_points());
+    let (mut ss, mut cnt) = (0.0, 0usize);
+    for fr in 0..f {
+        for r in [2 * fr, 2 * fr + 1] {
+            let (mut sum, mut k) = (0.0, 0usize);
+            for p in 0..n {
+                if meas.visible[fr * n + p] {
+                    sum += meas.w[(r, p)];
+                    k += 1;
+                }
+            }
+            if k == 0 {
+                continue;
+            }
+            let mean = sum / k as f64;
+            for p in 0..n {
+                if meas.visible[fr * n + p] {
+                    ss += (meas.w[(r, p)] - mean).powi(2);
+                    cnt += 1;
+                }
+            }
+        }
+    }
+    if cnt == 0 {
+        0.0
+    } else {
+        (ss / cnt as f64).sqrt()
+    }
+}
+
+fn select_columns(meas: &Measurements, cols: &[usize]) -> Measurements {
+    let n = meas.n_points();
+    let f = meas.n_frames();
+    let w = faer::Mat::from_fn(meas.w.nrows(), cols.len(), |r, j| meas.w[(r, cols[j])]);
+    let mut vis = Vec::with_capacity(f * cols.len());
+    for fr in 0..f {
+        for &c in cols {
+            vis.push(meas.visible[fr * n + c]);
+        }
+    }
+    Measurements::new(w, vis)
+}
+
+fn no_majority(
+    reason: NoMajorityReason,
+    n: usize,
+    config: &RobustConfig,
+    rr: RansacResult<AffineSubspace>,
+    tau: f64,
+) -> RobustResult {
+    RobustResult {
+        verdict: Verdict::NoRigidMajority {
+            reason,
+            inlier_fraction: 0.0,
+            rival_fraction: 0.0,
+            min_inlier_fraction: config.min_inlier_fraction,
+        },
+        inlier_tracks: vec![false; n],
+        flagged_entries: Vec::new(),
+        noise_sigma: rr.sigma.unwrap_or(f64::NAN),
+        threshold_px: tau,
+        entry_threshold_px: f64::NAN,
+        iterations: rr.iterations + rr.scale_iterations,
+        score: rr.score,
+        track_residuals: vec![None; n],
+        coordinates: vec![None; n],
+        model: None,
+        candidate_tracks: vec![false; n],
+        rival_tracks: 0,
+        gross_rounds: 0,
+        ransac: rr,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chi_square_and_normal_quantiles() {
+        assert!((normal_quantile(0.999) - 3.090_232).abs() < 1e-4);
+        assert!((normal_quantile(0.5)).abs() < 1e-6);
+        assert!((chi2_quantile(2.0, 0.999) - 13.815_51).abs() < 1e-4);
+        assert!((chi2_quantile(1.0, 0.99) - 6.634_897).abs() < 1e-3);
+        // Tables: χ²₇(0.999) = 24.322, χ²₅₀(0.999) = 86.661.
+        assert!((chi2_quantile(7.0, 0.999) - 24.322).abs() < 0.3);
+        assert!((chi2_quantile(50.0, 0.999) / 86.661 - 1.0).abs() < 0.005);
+    }
+}

@@ -1,0 +1,647 @@
+//! The track estimator: rigid trajectories span a 3-dimensional affine subspace of R^{2F}.
+//!
+//! Under an affine camera, track `p`'s trajectory `w_p ∈ R^{2F}` (rows `2f`, `2f+1` = x, y
+//! in frame `f`) is `w_p = M s_p + t` with the 2F×3 motion `M`, the offset `t` and the
+//! point's 3 affine coordinates `s_p` (Tomasi & Kanade 1992). Tracks of one rigid scene
+//! therefore lie on a 3-dimensional affine subspace `{M s + t}`; a track that follows the
+//! wrong thing (slides, jumps, belongs to an independently moving object) does not.
+//!
+//! * **Hypothesis** ([`Estimator::fit`]) from a minimal sample of 4 tracks `a, b, c, d`,
+//!   on the frames `D` where all four are observed (at least `min_overlap`): offset
+//!   `t = w_a`, directions `M = [w_b − w_a, w_c − w_a, w_d − w_a]` restricted to `D`. The
+//!   sample is rejected when these directions are ill-conditioned, `σ₃/σ₁ <
+//!   min_sample_condition` (the 4 tracks are nearly coplanar in the affine sense, so the
+//!   subspace is not determined).
+//! * **Sampling with missing data** ([`Estimator::sample`]): the first track is drawn among
+//!   tracks seen in ≥ `min_overlap` frames, each further one among tracks sharing ≥
+//!   `min_overlap` frames with the intersection of the tracks drawn so far, so `|D| ≥
+//!   min_overlap` by construction.
+//! * **Residual** ([`Estimator::residual`]) of track `p`: over the frames `O` where `p` is
+//!   observed (and not excluded) and the model is defined (`|O| ≥ min_overlap`, otherwise
+//!   the track cannot be scored), solve `s = argmin Σ_{f∈O} ‖M_f s + t_f − w_fp‖²` (3×3
+//!   normal equations), then *trim*: drop the `⌊α|O|⌋` frames with the largest residual and
+//!   refit (twice; `α = trim_fraction`), so a few gross per-entry errors on a good track do
+//!   not make the whole track an outlier. The residual is the per-coordinate RMS of the
+//!   kept frames, corrected for the 3 fitted parameters and for the trimming:
+//!   `r² = Σ_kept ‖e_f‖² / (2k − 3) / c_α`, `c_α = 1 + α ln α / (1 − α)` (the mean of a
+//!   χ²₂ variable truncated at its `1 − α` quantile, divided by 2), so that `r ≈ σ` for an
+//!   inlier with Gaussian noise of σ per coordinate.
+//! * **Threshold**: `r²/σ² ≈ χ²_ν/ν` with `ν = 2k − 3`; the multiple
+//!   `κ = sqrt(χ²_ν(p)/ν)` is taken at the smallest scorable overlap `k = min_overlap`
+//!   (the most permissive case), e.g. `κ = 1.86` for `min_overlap = 5`, `p = 0.999`.
+//!   `σ = median of inlier residuals` (Wilson–Hilferty median correction).
+//! * **Refit** ([`Estimator::refit`], local optimization and final fit): an affine
+//!   factorization of the inlier tracks over *all* frames. Complete data: the centering
+//!   trick and a rank-3 truncated SVD ([`crate::svd`]). Then, or directly with missing
+//!   data, alternating least squares over the observed entries, started from the current
+//!   model: `s_p` by 3×3 least squares per track, `[M_f | t_f]` by 4×4 least squares per
+//!   frame (a frame is defined when ≥ 4 inliers with well-conditioned coordinates see it).
+//!   After every sweep, entries whose distance exceeds `sqrt(χ²₂(0.999)) · σ_e` with
+//!   `σ_e = median distance / sqrt(2 ln 2)` are given zero weight in the next sweep (hard
+//!   redescending reweighting), so gross entries do not pull the fit.
+//!
+//! Hypotheses defined on few frames can only score tracks overlapping them; unscored tracks
+//! cost as outliers in the MSAC score, so hypotheses (and refits) covering more frames and
+//! explaining more tracks are preferred, and LO's refit extends the best one to all frames.
+//!
+//! Complexity: fit O(F); residual O(k) per track; one MSAC evaluation O(#observations);
+//! sampling with missing data O(N · F/64) per draw (bitset intersections); refit O(F·N)
+//! for the SVD on complete data plus O(#observations) per ALS sweep.
+
+use faer::Mat;
+use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
+use rand::{Rng, RngExt};
+
+use super::ransac::Estimator;
+use crate::Measurements;
+use crate::svd::{TruncatedSvdConfig, truncated_svd};
+
+/// Settings of the track estimator. Every field has a documented default.
+#[derive(Debug, Clone)]
+pub struct SubspaceConfig {
+    /// Frames a track must share with a hypothesis to be scored, and frames the 4 tracks
+    /// of a sample must share. Clamped to the number of frames. Default 5.
+    pub min_overlap: usize,
+    /// Fraction `α` of each track's frames trimmed from its residual (tolerated gross
+    /// entries per track). Default 0.2.
+    pub trim_fraction: f64,
+    /// Samples whose direction matrix has `σ₃/σ₁` below this are rejected. Default 0.02.
+    pub min_sample_condition: f64,
+    /// ALS sweeps per local-optimization refit. Default 10.
+    pub lo_als_iterations: usize,
+    /// ALS sweeps of the final refit. Default 50.
+    pub final_als_iterations: usize,
+}
+
+impl Default for SubspaceConfig {
+    fn default() -> Self {
+        Self {
+            min_overlap: 5,
+            trim_fraction: 0.2,
+            min_sample_condition: 0.02,
+            lo_als_iterations: 10,
+            final_als_iterations: 50,
+        }
+    }
+}
+
+/// An affine subspace `{M s + t}` of R^{2F}, defined on a subset of the frames.
+#[derive(Debug, Clone)]
+pub struct AffineSubspace {
+    /// Number of frames F.
+    pub n_frames: usize,
+    /// 2F×3 motion, row-major: row `r` is `m[3r..3r+3]` (rows of undefined frames are 0).
+    pub m: Vec<f64>,
+    /// Offset, 2F.
+    pub t: Vec<f64>,
+    /// Frames on which the subspace is defined.
+    pub defined: Vec<bool>,
+}
+
+impl AffineSubspace {
+    /// Number of frames on which the model is defined.
+    pub fn n_defined(&self) -> usize {
+        self.defined.iter().filter(|&&d| d).count()
+    }
+
+    /// Predicted image point of affine coordinates `s` in frame `f`.
+    pub fn predict(&self, f: usize, s: &[f64; 3]) -> [f64; 2] {
+        let row = |r: usize| {
+            self.t[r] + self.m[3 * r] * s[0] + self.m[3 * r + 1] * s[1] + self.m[3 * r + 2] * s[2]
+        };
+        [row(2 * f), row(2 * f + 1)]
+    }
+
+    /// The motion as a 2F×3 matrix (rows of undefined frames are 0).
+    pub fn motion(&self) -> Mat<f64> {
+        Mat::from_fn(2 * self.n_frames, 3, |r, k| self.m[3 * r + k])
+    }
+}
+
+/// Robust least-squares fit of one track to a model.
+#[derive(Debug, Clone, Copy)]
+pub struct TrackFit {
+    /// Affine coordinates.
+    pub s: [f64; 3],
+    /// Trimmed, dof-corrected per-coordinate RMS (see the module documentation), pixels.
+    pub rms: f64,
+    /// Frames used for scoring (observed, not excluded, model defined).
+    pub overlap: usize,
+    /// Frames kept after trimming.
+    pub kept: usize,
+}
+
+/// The track estimator over the columns of a [`Measurements`]; items are track indices.
+#[derive(Debug, Clone)]
+pub struct TrackSubspace {
+    f: usize,
+    n: usize,
+    /// Column-major copy of W: `obs[p * 2F + r]`.
+    obs: Vec<f64>,
+    /// Usable frames (observed and not excluded) per track.
+    frames_of: Vec<Vec<u32>>,
+    /// Bitset of usable frames per track, `words` u64 each.
+    bits: Vec<u64>,
+    words: usize,
+    /// Tracks with at least `min_overlap` usable frames.
+    eligible: Vec<usize>,
+    complete: bool,
+    cfg: SubspaceConfig,
+    min_overlap: usize,
+    /// Degrees of freedom of a track of median length (for the σ median correction).
+    nu_typical: f64,
+}
+
+/// `sqrt(2 ln 2)`: the median of the distance of a 2D standard Gaussian.
+const RAYLEIGH_MEDIAN: f64 = 1.177_410_022_515_474_8;
+
+fn solve3(g: &Matrix3<f64>, b: &Vector3<f64>) -> Option<Vector3<f64>> {
+    let scale = g.diagonal().max();
+    if !(scale > 0.0) {
+        return None;
+    }
+    // Cholesky pivots squared bound the smallest eigenvalue from above; a tiny pivot means
+    // the coordinates are not determined (relative tolerance 1e-10).
+    let c = g.cholesky()?;
+    let l = c.l_dirty();
+    let min_pivot = (0..3)
+        .map(|i| l[(i, i)] * l[(i, i)])
+        .fold(f64::INFINITY, f64::min);
+    if !(min_pivot > 1e-10 * scale) {
+        return None;
+    }
+    Some(c.solve(b))
+}
+
+impl TrackSubspace {
+    /// Builds the estimator for all tracks of `meas`, with no excluded entry. O(F·N).
+    pub fn new(meas: &Measurements, cfg: &SubspaceConfig) -> Self {
+        Self::with_exclusions(meas, cfg, &[])
+    }
+
+    /// Builds the estimator with the given (frame, track) entries treated as unobserved.
+    pub fn with_exclusions(
+        meas: &Measurements,
+        cfg: &SubspaceConfig,
+        excluded: &[(usize, usize)],
+    ) -> Self {
+        let (f, n) = (meas.n_frames(), meas.n_points());
+        let rows = 2 * f;
+        let mut usable = meas.visible.clone();
+        for &(fr, p) in excluded {
+            if fr < f && p < n {
+                usable[fr * n + p] = false;
+            }
+        }
+        let mut obs = vec![0.0; rows * n];
+        for p in 0..n {
+            for r in 0..rows {
+                obs[p * rows + r] = meas.w[(r, p)];
+            }
+        }
+        let words = f.div_ceil(64).max(1);
+        let mut bits = vec![0u64; words * n];
+        let mut frames_of = vec![Vec::new(); n];
+        for fr in 0..f {
+            for p in 0..n {
+                if usable[fr * n + p] {
+                    frames_of[p].push(fr as u32);
+                    bits[p * words + fr / 64] |= 1u64 << (fr % 64);
+                }
+            }
+        }
+        let min_overlap = cfg.min_overlap.clamp(2, f.max(2));
+        let eligible: Vec<usize> = (0..n)
+            .filter(|&p| frames_of[p].len() >= min_overlap)
+            .collect();
+        let complete = usable.iter().all(|&u| u);
+        let mut lens: Vec<f64> = frames_of.iter().map(|v| v.len() as f64).collect();
+        let med = if lens.is_empty() {
+            min_overlap as f64
+        } else {
+            let k = lens.len() / 2;
+            *lens.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
+        };
+        Self {
+            f,
+            n,
+            obs,
+            frames_of,
+            bits,
+            words,
+            eligible,
+            complete,
+            cfg: cfg.clone(),
+            min_overlap,
+            nu_typical: (2.0 * med - 3.0).max(1.0),
+        }
+    }
+
+    /// Number of tracks.
+    pub fn n_tracks(&self) -> usize {
+        self.n
+    }
+
+    /// Number of frames.
+    pub fn n_frames(&self) -> usize {
+        self.f
+    }
+
+    /// Tracks seen in at least `min_overlap` frames (the ones that can be sampled).
+    pub fn n_eligible(&self) -> usize {
+        self.eligible.len()
+    }
+
+    /// The effective `min_overlap` (clamped to the number of frames).
+    pub fn min_overlap(&self) -> usize {
+        self.min_overlap
+    }
+
+    /// Usable frames of track `p`.
+    pub fn frames_of(&self, p: usize) -> &[u32] {
+        &self.frames_of[p]
+    }
+
+    #[inline]
+    fn w(&self, p: usize, r: usize) -> f64 {
+        self.obs[p * 2 * self.f + r]
+    }
+
+    /// Observed image point of track `p` in frame `f` (whether usable or not).
+    pub fn observation(&self, f: usize, p: usize) -> [f64; 2] {
+        [self.w(p, 2 * f), self.w(p, 2 * f + 1)]
+    }
+
+    fn overlap_count(&self, p: usize, mask: &[u64]) -> usize {
+        (0..self.words)
+            .map(|k| (self.bits[p * self.words + k] & mask[k]).count_ones() as usize)
+            .sum()
+    }
+
+    /// Least-squares coordinates of track `p` from `frames` (which must be defined);
+    /// `None` when they are not determined.
+    pub fn ls_coords(&self, model: &AffineSubspace, p: usize, frames: &[u32]) -> Option<[f64; 3]> {
+        let mut g = Matrix3::zeros();
+        let mut b = Vector3::zeros();
+        for &fr in frames {
+            for r in [2 * fr as usize, 2 * fr as usize + 1] {
+                let a = Vector3::new(model.m[3 * r], model.m[3 * r + 1], model.m[3 * r + 2]);
+                g += a * a.transpose();
+                b += a * (self.w(p, r) - model.t[r]);
+            }
+        }
+        solve3(&g, &b).map(|s| [s[0], s[1], s[2]])
+    }
+
+    /// Squared image distance of track `p`'s observation in frame `fr` to `M_f s + t_f`.
+    pub fn dist2(&self, model: &AffineSubspace, p: usize, fr: usize, s: &[f64; 3]) -> f64 {
+        let q = model.predict(fr, s);
+        let dx = q[0] - self.w(p, 2 * fr);
+        let dy = q[1] - self.w(p, 2 * fr + 1);
+        dx * dx + dy * dy
+    }
+
+    /// Trimmed robust fit of track `p` (see the module documentation); `None` when the
+    /// track shares fewer than `min_overlap` usable frames with the model or its
+    /// coordinates are not determined.
+    pub fn track_fit(&self, model: &AffineSubspace, p: usize) -> Option<TrackFit> {
+        let frames: Vec<u32> = self.frames_of[p]
+            .iter()
+            .copied()
+            .filter(|&fr| model.defined[fr as usize])
+            .collect();
+        let k = frames.len();
+        if k < self.min_overlap {
+            return None;
+        }
+        let mut s = self.ls_coords(model, p, &frames)?;
+        let trim = ((self.cfg.trim_fraction * k as f64).floor() as usize).min(k - 2);
+        let mut kept = frames.clone();
+        let mut d2: Vec<(f64, u32)> = Vec::with_capacity(k);
+        if trim > 0 {
+            for _ in 0..2 {
+                d2.clear();
+                d2.extend(
+                    frames
+                        .iter()
+                        .map(|&fr| (self.dist2(model, p, fr as usize, &s), fr)),
+                );
+                d2.select_nth_unstable_by(k - trim - 1, |a, b| a.0.total_cmp(&b.0));
+                kept.clear();
+                kept.extend(d2[..k - trim].iter().map(|x| x.1));
+                match self.ls_coords(model, p, &kept) {
+                    Some(s2) => s = s2,
+                    None => break,
+                }
+            }
+        }
+        let ss: f64 = kept
+            .iter()
+            .map(|&fr| self.dist2(model, p, fr as usize, &s))
+            .sum();
+        let kk = kept.len();
+        let alpha = trim as f64 / k as f64;
+        let c = if alpha > 0.0 {
+            1.0 + alpha * alpha.ln() / (1.0 - alpha)
+        } else {
+            1.0
+        };
+        let dof = (2.0 * kk as f64 - 3.0).max(1.0);
+        Some(TrackFit {
+            s,
+            rms: (ss / dof / c).sqrt(),
+            overlap: k,
+            kept: kk,
+        })
+    }
+
+    /// Affine factorization of `inliers` over all frames, started from `model`, with
+    /// `sweeps` ALS sweeps (see the module documentation). Public for the final refit.
+    pub fn refit_with(
+        &self,
+        model: &AffineSubspace,
+        inliers: &[usize],
+        sweeps: usize,
+    ) -> Option<AffineSubspace> {
+        if inliers.len() < 4 {
+            return None;
+        }
+        let mut init = model.clone();
+        if self.complete {
+            init = self.svd_fit(inliers)?;
+        }
+        self.als(init, inliers, sweeps)
+    }
+
+    /// Centering + rank-3 truncated SVD of the (complete) inlier columns.
+    fn svd_fit(&self, inliers: &[usize]) -> Option<AffineSubspace> {
+        let rows = 2 * self.f;
+        let k = inliers.len() as f64;
+        let t: Vec<f64> = (0..rows)
+            .map(|r| inliers.iter().map(|&p| self.w(p, r)).sum::<f64>() / k)
+            .collect();
+        let x = Mat::from_fn(rows, inliers.len(), |r, j| self.w(inliers[j], r) - t[r]);
+        let svd = truncated_svd(x.as_ref(), 3, &TruncatedSvdConfig::default()).ok()?;
+        if svd.s.len() < 3 || !(svd.s[2] > 0.0) {
+            return None;
+        }
+        let mut m = vec![0.0; rows * 3];
+        for r in 0..rows {
+            for c in 0..3 {
+                m[3 * r + c] = svd.u[(r, c)] * svd.s[c];
+            }
+        }
+        Some(AffineSubspace {
+            n_frames: self.f,
+            m,
+            t,
+            defined: vec![true; self.f],
+        })
+    }
+
+    /// Alternating least squares with hard rejection of outlying entries.
+    fn als(
+        &self,
+        mut model: AffineSubspace,
+        inliers: &[usize],
+        sweeps: usize,
+    ) -> Option<AffineSubspace> {
+        let f = self.f;
+        // Entry weights, aligned with frames_of of each inlier.
+        let mut keep: Vec<Vec<bool>> = inliers
+            .iter()
+            .map(|&p| vec![true; self.frames_of[p].len()])
+            .collect();
+        let mut coords: Vec<Option<[f64; 3]>> = vec![None; inliers.len()];
+        let mut last_cost = f64::INFINITY;
+        let chi2_cut = super::chi2_quantile(2.0, 0.999);
+        let mut frames_buf: Vec<u32> = Vec::new();
+        for sweep in 0..sweeps.max(1) {
+            // S-step.
+            for (j, &p) in inliers.iter().enumerate() {
+                frames_buf.clear();
+                frames_buf.extend(
+                    self.frames_of[p]
+                        .iter()
+                        .zip(&keep[j])
+                        .filter(|(fr, k)| **k && model.defined[**fr as usize])
+                        .map(|(fr, _)| *fr),
+                );
+                coords[j] = if frames_buf.len() >= 2 {
+                    self.ls_coords(&model, p, &frames_buf)
+                } else {
+                    None
+                };
+            }
+            // M-step: per frame, [m_x t_x; m_y t_y] from Σ [s;1][s;1]ᵀ.
+            let mut a = vec![Matrix4::<f64>::zeros(); f];
+            let mut bx = vec![Vector4::<f64>::zeros(); f];
+            let mut by = vec![Vector4::<f64>::zeros(); f];
+            let mut cnt = vec![0usize; f];
+            for (j, &p) in inliers.iter().enumerate() {
+                let Some(s) = coords[j] else { continue };
+                let v = Vector4::new(s[0], s[1], s[2], 1.0);
+                let vv = v * v.transpose();
+                for (&fr, &k) in self.frames_of[p].iter().zip(&keep[j]) {
+                    if !k {
+                        continue;
+                    }
+                    let fr = fr as usize;
+                    a[fr] += vv;
+                    bx[fr] += v * self.w(p, 2 * fr);
+                    by[fr] += v * self.w(p, 2 * fr + 1);
+                    cnt[fr] += 1;
+                }
+            }
+            for fr in 0..f {
+                let ok = cnt[fr] >= 4 && {
+                    let e = a[fr].symmetric_eigenvalues();
+                    e.min() > 1e-10 * e.max()
+                };
+                let sol = if ok {
+                    a[fr]
+                        .cholesky()
+                        .map(|c| (c.solve(&bx[fr]), c.solve(&by[fr])))
+                } else {
+                    None
+                };
+                match sol {
+                    Some((x, y)) => {
+                        for (row, v) in [(2 * fr, x), (2 * fr + 1, y)] {
+                            model.m[3 * row] = v[0];
+                            model.m[3 * row + 1] = v[1];
+                            model.m[3 * row + 2] = v[2];
+                            model.t[row] = v[3];
+                        }
+                        model.defined[fr] = true;
+                    }
+                    None => {
+                        model.defined[fr] = false;
+                        for row in [2 * fr, 2 * fr + 1] {
+                            model.m[3 * row..3 * row + 3].fill(0.0);
+                            model.t[row] = 0.0;
+                        }
+                    }
+                }
+            }
+            // Re-weighting: distances of all inlier entries, robust scale, hard cut.
+            let mut d2all = Vec::new();
+            let mut cost = 0.0;
+            for (j, &p) in inliers.iter().enumerate() {
+                let Some(s) = coords[j] else { continue };
+                for &fr in &self.frames_of[p] {
+                    if model.defined[fr as usize] {
+                        d2all.push(self.dist2(&model, p, fr as usize, &s));
+                    }
+                }
+            }
+            if d2all.is_empty() {
+                return None;
+            }
+            let mid = d2all.len() / 2;
+            let med = *d2all.select_nth_unstable_by(mid, |x, y| x.total_cmp(y)).1;
+            let sigma_e = med.sqrt() / RAYLEIGH_MEDIAN;
+            let cut2 = chi2_cut * sigma_e * sigma_e;
+            for (j, &p) in inliers.iter().enumerate() {
+                let Some(s) = coords[j] else { continue };
+                for (idx, &fr) in self.frames_of[p].iter().enumerate() {
+                    if model.defined[fr as usize] {
+                        let d2 = self.dist2(&model, p, fr as usize, &s);
+                        keep[j][idx] = d2 <= cut2 || cut2 == 0.0;
+                        if keep[j][idx] {
+                            cost += d2;
+                        }
+                    }
+                }
+            }
+            if sweep > 1 && (last_cost - cost).abs() <= 1e-9 * last_cost.max(1e-300) {
+                break;
+            }
+            last_cost = cost;
+        }
+        if model.n_defined() < self.min_overlap {
+            return None;
+        }
+        Some(model)
+    }
+}
+
+impl Estimator for TrackSubspace {
+    type Model = AffineSubspace;
+
+    fn min_sample_size(&self) -> usize {
+        4
+    }
+
+    fn sample<R: Rng + ?Sized>(&self, _n: usize, rng: &mut R, out: &mut Vec<usize>) -> bool {
+        out.clear();
+        let e = &self.eligible;
+        if e.len() < 4 {
+            return false;
+        }
+        let first = e[rng.random_range(0..e.len())];
+        out.push(first);
+        if self.complete {
+            while out.len() < 4 {
+                let c = e[rng.random_range(0..e.len())];
+                if !out.contains(&c) {
+                    out.push(c);
+                }
+            }
+            return true;
+        }
+        let mut mask: Vec<u64> = self.bits[first * self.words..(first + 1) * self.words].to_vec();
+        let mut cand = Vec::new();
+        while out.len() < 4 {
+            cand.clear();
+            cand.extend(
+                e.iter().copied().filter(|c| {
+                    !out.contains(c) && self.overlap_count(*c, &mask) >= self.min_overlap
+                }),
+            );
+            if cand.is_empty() {
+                return false;
+            }
+            let c = cand[rng.random_range(0..cand.len())];
+            for k in 0..self.words {
+                mask[k] &= self.bits[c * self.words + k];
+            }
+            out.push(c);
+        }
+        true
+    }
+
+    fn fit(&self, sample: &[usize]) -> Option<AffineSubspace> {
+        if sample.len() != 4 {
+            return None;
+        }
+        let f = self.f;
+        let mut defined = vec![false; f];
+        let mut nd = 0;
+        for fr in 0..f {
+            let word = fr / 64;
+            let bit = 1u64 << (fr % 64);
+            if sample
+                .iter()
+                .all(|&p| self.bits[p * self.words + word] & bit != 0)
+            {
+                defined[fr] = true;
+                nd += 1;
+            }
+        }
+        if nd < self.min_overlap {
+            return None;
+        }
+        let (a, rest) = (sample[0], &sample[1..]);
+        let mut m = vec![0.0; 6 * f];
+        let mut t = vec![0.0; 2 * f];
+        let mut g = Matrix3::<f64>::zeros();
+        for fr in 0..f {
+            if !defined[fr] {
+                continue;
+            }
+            for r in [2 * fr, 2 * fr + 1] {
+                t[r] = self.w(a, r);
+                let v = Vector3::new(
+                    self.w(rest[0], r) - t[r],
+                    self.w(rest[1], r) - t[r],
+                    self.w(rest[2], r) - t[r],
+                );
+                m[3 * r..3 * r + 3].copy_from_slice(v.as_slice());
+                g += v * v.transpose();
+            }
+        }
+        let e = g.symmetric_eigenvalues();
+        let (lo, hi) = (e.min(), e.max());
+        if !(hi > 0.0) || !(lo >= 0.0) || (lo / hi).sqrt() < self.cfg.min_sample_condition {
+            return None;
+        }
+        Some(AffineSubspace {
+            n_frames: f,
+            m,
+            t,
+            defined,
+        })
+    }
+
+    fn residual(&self, model: &AffineSubspace, item: usize) -> Option<f64> {
+        self.track_fit(model, item).map(|t| t.rms)
+    }
+
+    fn refit(&self, model: &AffineSubspace, inliers: &[usize]) -> Option<AffineSubspace> {
+        self.refit_with(model, inliers, self.cfg.lo_als_iterations)
+    }
+
+    /// `σ = median(r) / m_ν` with the Wilson–Hilferty median of `sqrt(χ²_ν/ν)`,
+    /// `m_ν = (1 − 2/(9ν))^{3/2}`, at the median track's `ν = 2k − 3`.
+    fn sigma_from_residuals(&self, r: &[f64]) -> f64 {
+        let nu = self.nu_typical;
+        crate::eval::median(r) / (1.0 - 2.0 / (9.0 * nu)).powf(1.5)
+    }
+
+    /// `κ = sqrt(χ²_ν(p)/ν)` with `ν = 2·min_overlap − 3`.
+    fn threshold_multiple(&self, p: f64) -> f64 {
+        let nu = (2 * self.min_overlap) as f64 - 3.0;
+        (super::chi2_quantile(nu, p) / nu).sqrt()
+    }
+}
