@@ -120,12 +120,38 @@ fn invalid_config_is_a_typed_error() {
             function_tolerance: f64::NAN,
             ..Default::default()
         },
+        CompletionConfig {
+            point_damping_decrease: 1.0,
+            ..Default::default()
+        },
+        CompletionConfig {
+            creep_tolerance: -1.0,
+            ..Default::default()
+        },
     ] {
         assert!(matches!(
             complete(&meas, &cfg, &mut crate::NoopObserver),
             Err(Error::InvalidConfig { .. })
         ));
     }
+}
+
+#[test]
+fn ridge_continuation_and_creep_switch_end_unregularised() {
+    // Geometric continuation 1e-4, 1e-6, …, then 1e-12, and a creep switch that fires
+    // immediately: the final objective is the unregularised one, so the noise-free scene
+    // is fitted exactly.
+    let meas = scene(8, 40, 6);
+    let cfg = CompletionConfig {
+        point_damping_initial: 1e-4,
+        point_damping_decrease: 1e-2,
+        creep_window: 1,
+        creep_tolerance: 1.0,
+        max_iterations: 300,
+        ..Default::default()
+    };
+    let c = complete(&meas, &cfg, &mut crate::NoopObserver).unwrap();
+    assert!(c.rms < 1e-6, "rms {}", c.rms);
 }
 
 #[test]
