@@ -1,0 +1,463 @@
+//! Pyramidal Lucas–Kanade feature tracking in Bouguet's formulation, with validity checks.
+//!
+//! Objective: for a point `u` in image `I`, find the displacement `d` minimizing the sum of
+//! squared differences over a `(2r+1)²` window,
+//! `ε(d) = Σ_{x ∈ W(u)} (I(x) − J(x + d))²`.
+//! Coarse to fine over the pyramid levels `L = Lm … 0` (coordinates `u_L = u / 2^L`), with the
+//! guess `g_Lm = 0` (or a caller's guess) and `g_{L−1} = 2 (g_L + d_L)`, each level solves
+//! its residual displacement `d_L` by Newton–Raphson iterations with the spatial gradient
+//! matrix of the *template* (computed once per level):
+//! `G = Σ [Ix² IxIy; IxIy Iy²]`, `b_k = Σ δI_k [Ix, Iy]ᵀ`, `δI_k = I(x) − J(x + g + ν_k)`,
+//! `η_k = G⁻¹ b_k`, `ν_{k+1} = ν_k + η_k`, until `‖η_k‖ < epsilon` or `max_iterations`.
+//! All window samples are bilinear (sub-pixel); the window's bilinear weights are shared by
+//! all its pixels, so sampling is four multiply-adds per pixel on contiguous rows.
+//!
+//! Validity checks (a failed point is reported with its [`Failure`], never a position):
+//! * **Out of image**: the final window (or a `border_margin`) must lie inside the image.
+//! * **Low texture**: `λmin(G) / (2r+1)² < min_eigenvalue` at level 0 (mean squared gradient
+//!   along the weakest direction, intensity units in `[0, 1]`), or `G` singular at any level.
+//! * **Residual**: mean absolute intensity error `Σ |I(x) − J(x + d)| / (2r+1)²` at the final
+//!   position above `max_residual`.
+//! * **Forward–backward**: tracking the result back from `J` to `I` must return within
+//!   `fb_threshold` pixels of `u` (Kalal, Mikolajczyk & Matas 2010).
+//!
+//! References: B. D. Lucas and T. Kanade, "An iterative image registration technique with an
+//! application to stereo vision", IJCAI 1981; J.-Y. Bouguet, "Pyramidal implementation of the
+//! Lucas Kanade feature tracker", Intel, 2000; Z. Kalal, K. Mikolajczyk, J. Matas,
+//! "Forward-backward error: automatic detection of tracking failures", ICPR 2010.
+//!
+//! Complexity: O(P · L · (2r+1)² · K) for P points, L levels and K iterations per level,
+//! doubled by the forward–backward check; parallel over points (rayon), no allocation per
+//! point (per-thread scratch buffers).
+
+// Negated comparisons are deliberate: they also reject NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use rayon::prelude::*;
+
+use super::pyramid::{Level, Pyramid};
+use crate::{Error, Result};
+
+/// Lucas–Kanade tracker settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KltConfig {
+    /// Window side `2r+1`, odd, ≥ 3. Default 21 (as OpenCV's `calcOpticalFlowPyrLK`).
+    pub window: usize,
+    /// Index of the coarsest pyramid level (0 = no pyramid). Default 3 (as OpenCV). Levels
+    /// smaller than the window are not built.
+    pub max_level: usize,
+    /// Newton iterations per level at most. Default 30 (as OpenCV).
+    pub max_iterations: usize,
+    /// Stop a level's iterations when the update is shorter than this, pixels. Default 0.01.
+    pub epsilon: f32,
+    /// Low-texture threshold on `λmin(G) / window area` at level 0, intensities in `[0, 1]`
+    /// (so 1e-4 ≈ a gradient of 2.5 gray levels per pixel in the weakest direction).
+    /// Default 1e-4.
+    pub min_eigenvalue: f32,
+    /// Largest accepted mean absolute intensity error over the window at the final position,
+    /// intensities in `[0, 1]`. Default 0.06 (≈ 15 gray levels).
+    pub max_residual: f32,
+    /// Forward–backward round-trip tolerance in pixels; `None` disables the check (twice as
+    /// fast). Default `Some(1.0)`.
+    pub fb_threshold: Option<f32>,
+    /// A point is lost when it comes closer than this to the image border, pixels; `None`
+    /// (default) is the half window `r`, i.e. the whole window must stay inside the image.
+    pub border_margin: Option<f32>,
+}
+
+impl Default for KltConfig {
+    fn default() -> Self {
+        Self {
+            window: 21,
+            max_level: 3,
+            max_iterations: 30,
+            epsilon: 0.01,
+            min_eigenvalue: 1e-4,
+            max_residual: 0.06,
+            fb_threshold: Some(1.0),
+            border_margin: None,
+        }
+    }
+}
+
+impl KltConfig {
+    /// Half window `r`.
+    pub fn half(&self) -> usize {
+        self.window / 2
+    }
+
+    /// The effective border margin (see [`KltConfig::border_margin`]).
+    pub fn margin(&self) -> f32 {
+        self.border_margin.unwrap_or(self.half() as f32)
+    }
+
+    pub(crate) fn validate(&self) -> Result<()> {
+        let bad = |field, message: String| Err(Error::InvalidConfig { field, message });
+        if self.window < 3 || self.window.is_multiple_of(2) {
+            return bad(
+                "klt.window",
+                format!("must be odd and ≥ 3, got {}", self.window),
+            );
+        }
+        if self.max_iterations == 0 {
+            return bad("klt.max_iterations", "must be ≥ 1".into());
+        }
+        if !(self.epsilon > 0.0 && self.epsilon.is_finite()) {
+            return bad(
+                "klt.epsilon",
+                format!("must be finite and > 0, got {}", self.epsilon),
+            );
+        }
+        if !(self.min_eigenvalue >= 0.0) {
+            return bad(
+                "klt.min_eigenvalue",
+                format!("must be ≥ 0, got {}", self.min_eigenvalue),
+            );
+        }
+        if !(self.max_residual > 0.0) {
+            return bad(
+                "klt.max_residual",
+                format!("must be > 0, got {}", self.max_residual),
+            );
+        }
+        if let Some(t) = self.fb_threshold
+            && !(t > 0.0)
+        {
+            return bad("klt.fb_threshold", format!("must be > 0, got {t}"));
+        }
+        if let Some(m) = self.border_margin
+            && !(m >= 0.0 && m.is_finite())
+        {
+            return bad("klt.border_margin", format!("must be ≥ 0, got {m}"));
+        }
+        Ok(())
+    }
+}
+
+/// Why a point was not tracked into the next frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Failure {
+    /// The window (or border margin) left the image.
+    OutOfImage,
+    /// Too little texture: the gradient matrix is (near) singular.
+    LowTexture,
+    /// Mean absolute intensity error over the window above `max_residual`.
+    Residual,
+    /// Tracking back did not return to the start within `fb_threshold`.
+    ForwardBackward,
+}
+
+/// Per-thread scratch: template window values and gradients, sampled target rows.
+struct Scratch {
+    iw: Vec<f32>,
+    gxw: Vec<f32>,
+    gyw: Vec<f32>,
+    jw: Vec<f32>,
+}
+
+impl Scratch {
+    fn new(n: usize) -> Scratch {
+        Scratch {
+            iw: vec![0.0; n],
+            gxw: vec![0.0; n],
+            gyw: vec![0.0; n],
+            jw: vec![0.0; n],
+        }
+    }
+}
+
+/// Bilinear sampling setup of a `side × side` window whose top-left sample is at `(x, y)`.
+#[derive(Clone, Copy)]
+struct Bilinear {
+    x0: isize,
+    y0: isize,
+    w00: f32,
+    w01: f32,
+    w10: f32,
+    w11: f32,
+}
+
+impl Bilinear {
+    fn new(x: f32, y: f32) -> Bilinear {
+        let (fx, fy) = (x.floor(), y.floor());
+        let (ax, ay) = (x - fx, y - fy);
+        Bilinear {
+            x0: fx as isize,
+            y0: fy as isize,
+            w00: (1.0 - ax) * (1.0 - ay),
+            w01: ax * (1.0 - ay),
+            w10: (1.0 - ax) * ay,
+            w11: ax * ay,
+        }
+    }
+
+    /// Whether all four neighbours of every window sample are inside a `w × h` image.
+    fn inside(&self, side: usize, w: usize, h: usize) -> bool {
+        self.x0 >= 0
+            && self.y0 >= 0
+            && (self.x0 as usize + side) < w
+            && (self.y0 as usize + side) < h
+    }
+
+    /// Samples `src` (a `w × h` image) into `dst` (`side × side`), border replicated.
+    #[inline(always)]
+    fn sample(&self, src: &[f32], w: usize, h: usize, side: usize, dst: &mut [f32]) {
+        if self.inside(side, w, h) {
+            let (x0, y0) = (self.x0 as usize, self.y0 as usize);
+            let (w00, w01, w10, w11) = (self.w00, self.w01, self.w10, self.w11);
+            for (r, out) in dst.chunks_exact_mut(side).enumerate() {
+                let a = (y0 + r) * w + x0;
+                // Equal-length slices let the compiler drop bounds checks and vectorize.
+                let (p00, p01) = (&src[a..a + side], &src[a + 1..a + 1 + side]);
+                let (p10, p11) = (&src[a + w..a + w + side], &src[a + w + 1..a + w + 1 + side]);
+                let out = &mut out[..side];
+                for c in 0..side {
+                    out[c] = w00 * p00[c] + w01 * p01[c] + w10 * p10[c] + w11 * p11[c];
+                }
+            }
+        } else {
+            // Border replicated: clamp the column indices once per window, not per pixel.
+            let cx = |x: isize| x.clamp(0, w as isize - 1) as usize;
+            let cy = |y: isize| y.clamp(0, h as isize - 1) as usize;
+            let mut cols = [0usize; 64];
+            for (r, out) in dst.chunks_exact_mut(side).enumerate() {
+                let ya = cy(self.y0 + r as isize) * w;
+                let yb = cy(self.y0 + r as isize + 1) * w;
+                for (c0, out) in out.chunks_mut(63).enumerate() {
+                    let base = self.x0 + (c0 * 63) as isize;
+                    let n = out.len();
+                    for (k, col) in cols[..n + 1].iter_mut().enumerate() {
+                        *col = cx(base + k as isize);
+                    }
+                    for c in 0..n {
+                        let (xa, xb) = (cols[c], cols[c + 1]);
+                        out[c] = self.w00 * src[ya + xa]
+                            + self.w01 * src[ya + xb]
+                            + self.w10 * src[yb + xa]
+                            + self.w11 * src[yb + xb];
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Sums `Σ (a−b)·gx`, `Σ (a−b)·gy` with 8 independent lanes (vectorizable).
+#[inline(always)]
+fn mismatch(a: &[f32], b: &[f32], gx: &[f32], gy: &[f32]) -> (f32, f32) {
+    let mut sx = [0f32; 8];
+    let mut sy = [0f32; 8];
+    let n = a.len() / 8 * 8;
+    for k in (0..n).step_by(8) {
+        let (a8, b8) = (&a[k..k + 8], &b[k..k + 8]);
+        let (x8, y8) = (&gx[k..k + 8], &gy[k..k + 8]);
+        for l in 0..8 {
+            let d = a8[l] - b8[l];
+            sx[l] += d * x8[l];
+            sy[l] += d * y8[l];
+        }
+    }
+    let (mut bx, mut by) = (sx.iter().sum::<f32>(), sy.iter().sum::<f32>());
+    for k in n..a.len() {
+        let d = a[k] - b[k];
+        bx += d * gx[k];
+        by += d * gy[k];
+    }
+    (bx, by)
+}
+
+/// Mean absolute difference.
+#[inline(always)]
+fn mean_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    let mut s = [0f32; 8];
+    let n = a.len() / 8 * 8;
+    for k in (0..n).step_by(8) {
+        for l in 0..8 {
+            s[l] += (a[k + l] - b[k + l]).abs();
+        }
+    }
+    let mut t = s.iter().sum::<f32>();
+    for k in n..a.len() {
+        t += (a[k] - b[k]).abs();
+    }
+    t / a.len() as f32
+}
+
+/// Gradient matrix `[gxx gxy; gxy gyy]` of the sampled template window.
+#[inline(always)]
+fn gradient_matrix(gx: &[f32], gy: &[f32]) -> (f32, f32, f32) {
+    let mut a = [0f32; 8];
+    let mut b = [0f32; 8];
+    let mut c = [0f32; 8];
+    let n = gx.len() / 8 * 8;
+    for k in (0..n).step_by(8) {
+        for l in 0..8 {
+            let (x, y) = (gx[k + l], gy[k + l]);
+            a[l] += x * x;
+            b[l] += x * y;
+            c[l] += y * y;
+        }
+    }
+    let (mut xx, mut xy, mut yy) = (a.iter().sum(), b.iter().sum(), c.iter().sum::<f32>());
+    for k in n..gx.len() {
+        let (x, y) = (gx[k], gy[k]);
+        xx += x * x;
+        xy += x * y;
+        yy += y * y;
+    }
+    (xx, xy, yy)
+}
+
+/// `λmin(G) / (2r+1)²` of the gradient matrix over the `window × window` window centred on
+/// the integer pixel `(x, y)` of `level` (0 when the window does not fit). The tracker's
+/// low-texture test, used to keep detection from starting tracks that would die at once.
+pub fn window_min_eigenvalue(level: &Level, x: usize, y: usize, window: usize) -> f32 {
+    let r = window / 2;
+    if x < r || y < r || x + r >= level.w || y + r >= level.h {
+        return 0.0;
+    }
+    let (mut a, mut b, mut c) = (0f32, 0f32, 0f32);
+    for yy in y - r..=y + r {
+        let row = yy * level.w;
+        let gx = &level.gx[row + x - r..=row + x + r];
+        let gy = &level.gy[row + x - r..=row + x + r];
+        let (xx, xy, yy2) = gradient_matrix(gx, gy);
+        a += xx;
+        b += xy;
+        c += yy2;
+    }
+    let half = 0.5 * (a - c);
+    (0.5 * (a + c) - (half * half + b * b).sqrt()) / (window * window) as f32
+}
+
+type TrackOne = std::result::Result<([f32; 2], f32), Failure>;
+
+/// Tracks one point `u` from `prev` to `next` starting from the level-0 displacement guess
+/// `guess`; returns the new position and the final mean absolute residual.
+fn track_one(
+    prev: &Pyramid,
+    next: &Pyramid,
+    u: [f32; 2],
+    guess: [f32; 2],
+    cfg: &KltConfig,
+    s: &mut Scratch,
+) -> TrackOne {
+    let r = cfg.half();
+    let side = cfg.window;
+    let area = (side * side) as f32;
+    let top = cfg
+        .max_level
+        .min(prev.levels.len() - 1)
+        .min(next.levels.len() - 1);
+    let top_scale = (1u32 << top) as f32;
+    let mut g = [guess[0] / top_scale, guess[1] / top_scale];
+    let mut d = [0f32; 2];
+    for l in (0..=top).rev() {
+        let scale = 1.0 / (1u32 << l) as f32;
+        let (li, lj): (&Level, &Level) = (&prev.levels[l], &next.levels[l]);
+        let p = [u[0] * scale, u[1] * scale];
+        let (wi, hi) = (li.w, li.h);
+        // Template window and gradients at p.
+        let bi = Bilinear::new(p[0] - r as f32, p[1] - r as f32);
+        bi.sample(&li.img, wi, hi, side, &mut s.iw);
+        bi.sample(&li.gx, wi, hi, side, &mut s.gxw);
+        bi.sample(&li.gy, wi, hi, side, &mut s.gyw);
+        let (gxx, gxy, gyy) = gradient_matrix(&s.gxw, &s.gyw);
+        let det = gxx * gyy - gxy * gxy;
+        let tr = 0.5 * (gxx + gyy);
+        let lmin = tr - (tr * tr - det).max(0.0).sqrt();
+        if l == 0 && lmin / area < cfg.min_eigenvalue {
+            return Err(Failure::LowTexture);
+        }
+        if !(det > f32::EPSILON * (gxx + gyy) * (gxx + gyy)) || lmin <= 0.0 {
+            return Err(Failure::LowTexture);
+        }
+        let inv_det = 1.0 / det;
+        let (wj, hj) = (lj.w as f32, lj.h as f32);
+        let mut nu = [0f32; 2];
+        for _ in 0..cfg.max_iterations {
+            let q = [p[0] + g[0] + nu[0], p[1] + g[1] + nu[1]];
+            let rf = r as f32;
+            if !(q[0] > -rf && q[1] > -rf && q[0] < wj + rf && q[1] < hj + rf) {
+                return Err(Failure::OutOfImage);
+            }
+            let bj = Bilinear::new(q[0] - r as f32, q[1] - r as f32);
+            bj.sample(&lj.img, lj.w, lj.h, side, &mut s.jw);
+            let (bx, by) = mismatch(&s.iw, &s.jw, &s.gxw, &s.gyw);
+            let eta = [
+                (gyy * bx - gxy * by) * inv_det,
+                (gxx * by - gxy * bx) * inv_det,
+            ];
+            nu[0] += eta[0];
+            nu[1] += eta[1];
+            if eta[0] * eta[0] + eta[1] * eta[1] < cfg.epsilon * cfg.epsilon {
+                break;
+            }
+        }
+        d = nu;
+        if l > 0 {
+            g = [2.0 * (g[0] + d[0]), 2.0 * (g[1] + d[1])];
+        }
+    }
+    let v = [u[0] + g[0] + d[0], u[1] + g[1] + d[1]];
+    let l0 = &next.levels[0];
+    let m = cfg.margin();
+    if !(v[0] >= m && v[1] >= m && v[0] <= (l0.w - 1) as f32 - m && v[1] <= (l0.h - 1) as f32 - m) {
+        return Err(Failure::OutOfImage);
+    }
+    // Residual at the final position (template window of level 0 is still in s.iw).
+    let bj = Bilinear::new(v[0] - r as f32, v[1] - r as f32);
+    bj.sample(&l0.img, l0.w, l0.h, side, &mut s.jw);
+    let res = mean_abs_diff(&s.iw, &s.jw);
+    if !(res <= cfg.max_residual) {
+        return Err(Failure::Residual);
+    }
+    Ok((v, res))
+}
+
+/// Tracks `points` from `prev` to `next`. `guesses`, when given, are level-0 displacement
+/// guesses per point (missing entries count as zero). Each result is the new position or the reason the point was lost.
+/// See the module documentation for the objective and checks.
+pub fn track_points(
+    prev: &Pyramid,
+    next: &Pyramid,
+    points: &[[f32; 2]],
+    guesses: Option<&[[f32; 2]]>,
+    cfg: &KltConfig,
+) -> Vec<std::result::Result<[f32; 2], Failure>> {
+    let n = cfg.window * cfg.window;
+    let l0 = &prev.levels[0];
+    let m = cfg.margin();
+    points
+        .par_iter()
+        .enumerate()
+        .map_init(
+            || Scratch::new(n),
+            |s, (i, &u)| {
+                if !(u[0] >= m
+                    && u[1] >= m
+                    && u[0] <= (l0.w - 1) as f32 - m
+                    && u[1] <= (l0.h - 1) as f32 - m)
+                {
+                    return Err(Failure::OutOfImage);
+                }
+                let guess = guesses
+                    .and_then(|g| g.get(i))
+                    .copied()
+                    .unwrap_or([0.0, 0.0]);
+                let (v, _) = track_one(prev, next, u, guess, cfg, s)?;
+                if let Some(t) = cfg.fb_threshold {
+                    // Independent backward pass (no guess), so a wrong forward match cannot
+                    // simply retrace its steps.
+                    let (w, _) = track_one(next, prev, v, [0.0, 0.0], cfg, s)
+                        .map_err(|_| Failure::ForwardBackward)?;
+                    let e = [w[0] - u[0], w[1] - u[1]];
+                    if e[0] * e[0] + e[1] * e[1] > t * t {
+                        return Err(Failure::ForwardBackward);
+                    }
+                }
+                Ok(v)
+            },
+        )
+        .collect()
+}
