@@ -78,6 +78,29 @@ pub enum Error {
         largest_frames: usize,
         largest_tracks: usize,
     },
+    /// The robust pass found no rigid motion shared by a clear majority of the tracks, so
+    /// any single reconstruction would be a confident wrong model.
+    #[error(
+        "no rigid majority ({reason}): the best rigid group holds {:.0} % of the tracks \
+         (at least {:.0} % needed), a rival group {:.0} %",
+        100.0 * inlier_fraction,
+        100.0 * min_inlier_fraction,
+        100.0 * rival_fraction
+    )]
+    NoRigidMajority {
+        reason: String,
+        inlier_fraction: f64,
+        rival_fraction: f64,
+        min_inlier_fraction: f64,
+    },
+    /// An image (or a folder of images) cannot be used as a frame sequence: unreadable or
+    /// undecodable file, empty folder, frames of different sizes.
+    #[error("{}: {message}", path.display())]
+    Image { path: PathBuf, message: String },
+    /// A video cannot be decoded: FFmpeg is not installed, cannot read the file, or the
+    /// stream ended mid-frame.
+    #[error("{}: {message}", path.display())]
+    Video { path: PathBuf, message: String },
     /// The data do not determine a solution (e.g. all points collinear).
     #[error("degenerate input: {0}")]
     Degenerate(String),

@@ -24,8 +24,12 @@ use faer::Mat;
 use nalgebra::{Vector2, Vector3};
 use serde::Serialize;
 
+use rand::SeedableRng;
+
+use crate::completion::{self, CompletionConfig, CompletionModel, CompletionSolverKind};
 use crate::metric::{self, MetricConfig, MetricUpgrade};
 use crate::refine::{self, RefineConfig, RefineResult};
+use crate::robust::{self, RobustConfig};
 use crate::svd::{self, SvdMethod, TruncatedSvdConfig};
 use crate::tracks::{Id, SetAside};
 use crate::{
@@ -48,6 +52,14 @@ pub struct Config {
     pub svd: TruncatedSvdConfig,
     /// Metric upgrade settings.
     pub metric: MetricConfig,
+    /// Robust pass (outlier tracks, gross entries) before the fit; `None` skips it.
+    /// Default on, with thresholds floored at 2 px per track and 4 px per entry.
+    pub robust: Option<RobustConfig>,
+    /// Missing-data solver, used when the table (after the robust pass) is incomplete.
+    /// Default: damped Wiberg on the affine model, data-driven start.
+    pub completion: CompletionConfig,
+    /// Seed of the robust pass's sampling. Default 0.
+    pub seed: u64,
     /// Levenberg–Marquardt refinement; `None` skips it. Default on.
     pub refine: Option<RefineConfig>,
     /// Warn "far from rank 3" when σ4/σ3 exceeds this. Default 0.1.
@@ -69,6 +81,15 @@ impl Default for Config {
                 ..TruncatedSvdConfig::default()
             },
             metric: MetricConfig::default(),
+            // Floors for model error that is not noise (perspective under the affine
+            // camera): see `RobustConfig::min_track_threshold_px`.
+            robust: Some(RobustConfig {
+                min_track_threshold_px: 2.0,
+                min_entry_threshold_px: 4.0,
+                ..RobustConfig::default()
+            }),
+            completion: CompletionConfig::default(),
+            seed: 0,
             refine: Some(RefineConfig::default()),
             rank3_warning_ratio: 0.1,
             rank2_warning_ratio: 0.05,
@@ -113,6 +134,50 @@ pub struct FactorizationReport {
     pub rms_px: f64,
 }
 
+/// The missing-data completion's report.
+#[derive(Debug, Clone, Serialize)]
+pub struct CompletionReport {
+    pub solver: CompletionSolverKind,
+    pub model: CompletionModel,
+    /// RMS of the affine fit over observed scalars, pixels (the literature's measure).
+    pub rms_px: f64,
+    pub status: SolverStatus,
+    pub iterations: usize,
+    pub runs: usize,
+    pub seconds: f64,
+}
+
+/// A (frame, track) pair by id.
+#[derive(Debug, Clone, Serialize)]
+pub struct EntryId {
+    pub frame: Id,
+    pub track: Id,
+}
+
+/// The robust pass's report.
+#[derive(Debug, Clone, Serialize)]
+pub struct RobustReport {
+    pub n_inlier_tracks: usize,
+    pub n_outlier_tracks: usize,
+    pub n_flagged_entries: usize,
+    pub outlier_tracks: Vec<Id>,
+    pub flagged_entries: Vec<EntryId>,
+    /// Robust estimate of the image noise σ, pixels.
+    pub noise_sigma_px: f64,
+    /// Track-level threshold, pixels.
+    pub threshold_px: f64,
+    /// Entry-level gross-error threshold, pixels.
+    pub entry_threshold_px: f64,
+    pub iterations: usize,
+    /// Best inlier count after each RANSAC iteration (for the recording).
+    #[serde(skip)]
+    pub inliers_per_iteration: Vec<usize>,
+    /// Flagged entries as (frame, track) indices into the input table.
+    #[serde(skip)]
+    pub flagged_indices: Vec<(usize, usize)>,
+    pub seconds: f64,
+}
+
 /// The refinement's report.
 #[derive(Debug, Clone, Serialize)]
 pub struct RefinementReport {
@@ -155,6 +220,10 @@ pub struct Reconstruction {
     /// σ4/σ3 (NaN when fewer than 4 singular values exist).
     pub rank_ratio: f64,
     pub factorization: FactorizationReport,
+    /// Present when the table had missing entries.
+    pub completion: Option<CompletionReport>,
+    /// Present when the robust pass ran.
+    pub robust: Option<RobustReport>,
     pub refinement: Option<RefinementReport>,
     pub input: InputSummary,
     /// Tracks and frames not used, with reasons.
@@ -172,11 +241,20 @@ pub struct Reconstruction {
     /// Affine prediction `M̂Ŝ + t1ᵀ` of every kept frame and track (2F'×N').
     #[serde(skip)]
     pub affine_prediction: Mat<f64>,
-    /// Indices into the input table of the kept frames and tracks.
+    /// Affine prediction of the outlier tracks in the used frames (2F'×n_outliers).
+    #[serde(skip)]
+    pub outlier_prediction: Mat<f64>,
+    /// The fitted cameras with the outlier tracks' points (triangulated, not refined).
+    #[serde(skip)]
+    pub outlier_model: MetricModel,
+    /// Indices into the input table of the frames and tracks the fit used.
     #[serde(skip)]
     pub kept_frames: Vec<usize>,
     #[serde(skip)]
     pub kept_tracks: Vec<usize>,
+    /// Indices into the input table of the outlier tracks.
+    #[serde(skip)]
+    pub outlier_tracks: Vec<usize>,
     /// Input frame and track ids (for writing outputs in the input's order).
     #[serde(skip)]
     pub input_frame_ids: Vec<Id>,
@@ -191,6 +269,28 @@ struct Affine {
     t: Vec<f64>,
     singular_values: Vec<f64>,
     report: FactorizationReport,
+}
+
+/// Forwards events and records the best inlier count of each main RANSAC iteration
+/// (`Event::Iteration` of solver `"ransac"`, run 0, whose `lambda` carries that count).
+struct InlierCapture<'a, 'b> {
+    inner: &'a mut dyn Observer,
+    counts: &'b mut Vec<usize>,
+}
+
+impl Observer for InlierCapture<'_, '_> {
+    fn on_event(&mut self, event: &Event<'_>) {
+        if let Event::Iteration {
+            solver: "ransac",
+            run: 0,
+            lambda,
+            ..
+        } = event
+        {
+            self.counts.push(*lambda as usize);
+        }
+        self.inner.on_event(event);
+    }
 }
 
 struct Timer<'a> {
@@ -232,24 +332,111 @@ impl Reconstruction {
             timings: Vec::new(),
         };
         let mut warnings = Vec::new();
-        let (kept, set_aside, kept_frames, kept_tracks) = timer.run("set-aside", |_| {
-            table.set_aside(config.min_frames_per_track, config.min_points_per_frame)
+        // An affine camera (2×4) needs 4 points per frame when it is estimated jointly with
+        // the translation (missing data); centering needs only 3.
+        let min_points = if table.is_complete() {
+            config.min_points_per_frame
+        } else {
+            config.min_points_per_frame.max(4)
+        };
+        let (kept, mut set_aside, kept_frames, kept_tracks) = timer.run("set-aside", |_| {
+            table.set_aside(config.min_frames_per_track, min_points)
         });
-        if kept.n_frames() < 2 || kept.n_tracks() < 4 {
-            return Err(Error::TooFew {
-                what: if kept.n_frames() < 2 {
-                    "usable frames (after setting aside under-observed tracks and frames)"
-                } else {
-                    "usable tracks (after setting aside under-observed tracks and frames)"
-                },
-                needed: if kept.n_frames() < 2 { 2 } else { 4 },
-                have: if kept.n_frames() < 2 {
-                    kept.n_frames()
-                } else {
-                    kept.n_tracks()
-                },
+        check_size(&kept)?;
+        let meas_all = kept.measurements();
+
+        // Robust pass: outlier tracks and gross entries.
+        let mut robust_report = None;
+        let mut inlier = vec![true; kept.n_tracks()];
+        let mut flagged: Vec<(usize, usize)> = Vec::new();
+        if let Some(rc) = &config.robust {
+            let mut rng = rand::rngs::StdRng::seed_from_u64(config.seed);
+            let t0 = Instant::now();
+            let mut counts = Vec::new();
+            let r = timer.run("robust", |obs| {
+                let mut capture = InlierCapture {
+                    inner: obs,
+                    counts: &mut counts,
+                };
+                robust::robust_filter_observed(&meas_all, rc, &mut rng, &mut capture)
+            })?;
+            let seconds = t0.elapsed().as_secs_f64();
+            if let robust::Verdict::NoRigidMajority {
+                reason,
+                inlier_fraction,
+                rival_fraction,
+                min_inlier_fraction,
+            } = r.verdict
+            {
+                return Err(Error::NoRigidMajority {
+                    reason: format!("{reason:?}"),
+                    inlier_fraction,
+                    rival_fraction,
+                    min_inlier_fraction,
+                });
+            }
+            inlier.clone_from(&r.inlier_tracks);
+            flagged.clone_from(&r.flagged_entries);
+            robust_report = Some(RobustReport {
+                outlier_tracks: (0..kept.n_tracks())
+                    .filter(|&p| !inlier[p])
+                    .map(|p| kept.track_ids()[p].clone())
+                    .collect(),
+                flagged_entries: flagged
+                    .iter()
+                    .map(|&(f, p)| EntryId {
+                        frame: kept.frame_ids()[f].clone(),
+                        track: kept.track_ids()[p].clone(),
+                    })
+                    .collect(),
+                n_inlier_tracks: inlier.iter().filter(|&&b| b).count(),
+                n_outlier_tracks: inlier.iter().filter(|&&b| !b).count(),
+                n_flagged_entries: flagged.len(),
+                noise_sigma_px: r.noise_sigma,
+                threshold_px: r.threshold_px,
+                entry_threshold_px: r.entry_threshold_px,
+                iterations: r.iterations,
+                inliers_per_iteration: counts,
+                flagged_indices: flagged
+                    .iter()
+                    .map(|&(f, p)| (kept_frames[f], kept_tracks[p]))
+                    .collect(),
+                seconds,
             });
+            let n_out = inlier.iter().filter(|&&b| !b).count();
+            if n_out > 0 || !flagged.is_empty() {
+                warnings.push(format!(
+                    "robust pass: {n_out} outlier track(s) and {} gross entr{} excluded from \
+                     the fit",
+                    flagged.len(),
+                    if flagged.len() == 1 { "y" } else { "ies" }
+                ));
+            }
         }
+
+        // The table the fit uses: inlier tracks, flagged entries hidden, set aside again
+        // (hiding entries can starve a track or a frame).
+        let inlier_idx: Vec<usize> = (0..kept.n_tracks()).filter(|&p| inlier[p]).collect();
+        let all_frames: Vec<usize> = (0..kept.n_frames()).collect();
+        let mut fit_table = kept.select(&all_frames, &inlier_idx);
+        let mut pos = vec![usize::MAX; kept.n_tracks()];
+        for (k, &p) in inlier_idx.iter().enumerate() {
+            pos[p] = k;
+        }
+        for &(f, p) in &flagged {
+            if pos[p] != usize::MAX {
+                fit_table.unset(f, pos[p]);
+            }
+        }
+        let min_points = if fit_table.is_complete() {
+            min_points
+        } else {
+            min_points.max(4)
+        };
+        let (fit, aside2, fit_frames, fit_tracks) =
+            fit_table.set_aside(config.min_frames_per_track, min_points);
+        set_aside.extend(aside2);
+        check_size(&fit)?;
         if !set_aside.is_empty() {
             warnings.push(format!(
                 "{} track(s) and {} frame(s) set aside (see `set_aside`)",
@@ -263,21 +450,42 @@ impl Reconstruction {
                     .count()
             ));
         }
-        let meas = kept.measurements();
+        // Indices into the input table of the frames and tracks the fit uses, and of the
+        // outlier tracks (reported with inlier = false).
+        let used_frames: Vec<usize> = fit_frames.iter().map(|&f| kept_frames[f]).collect();
+        let used_tracks: Vec<usize> = fit_tracks
+            .iter()
+            .map(|&k| kept_tracks[inlier_idx[k]])
+            .collect();
+        let outlier_kept: Vec<usize> = (0..kept.n_tracks()).filter(|&p| !inlier[p]).collect();
+        let meas = fit.measurements();
 
-        let affine = timer.run("factorize", |_| -> Result<Affine> {
+        let mut completion_report = None;
+        let affine = timer.run("factorize", |obs| -> Result<Affine> {
             if meas.is_complete() {
                 factorize_complete(&meas, &config.svd)
             } else {
-                Err(Error::MissingData {
-                    observed: meas.n_observed(),
-                    total: meas.visible.len(),
-                    message: "this build's pipeline factorizes complete tables only: keep the \
-                              frames and tracks seen everywhere, or use a missing-data solver"
-                        .into(),
-                })
+                let c = completion::complete(&meas, &config.completion, obs)?;
+                completion_report = Some(CompletionReport {
+                    solver: c.solver,
+                    model: c.model,
+                    rms_px: c.rms,
+                    status: c.report.status,
+                    iterations: c.report.iterations,
+                    runs: c.runs.len(),
+                    seconds: c.report.seconds,
+                });
+                factorization_from_completion(&meas, c)
             }
         })?;
+        if let Some(c) = &completion_report
+            && c.status != SolverStatus::Converged
+        {
+            warnings.push(format!(
+                "missing-data completion ended with status {:?} after {} iterations",
+                c.status, c.iterations
+            ));
+        }
         let sv = &affine.singular_values;
         let rank_ratio = if sv.len() >= 4 && sv[2] > 0.0 {
             sv[3] / sv[2]
@@ -342,73 +550,96 @@ impl Reconstruction {
         let mirrored = metric::apply_necker_convention(&mut model);
         let rms_px = model.rms(&meas);
 
+        // Outlier tracks: affine and metric points from their own observations in the used
+        // frames, given the fitted cameras (for display and completed.txt; not in the fit).
+        let outlier_meas = {
+            let t = kept.select(&fit_frames, &outlier_kept);
+            t.measurements()
+        };
+        let outlier_affine = affine_points(&outlier_meas, &affine);
+        let outlier_prediction = Mat::from_fn(affine.m_hat.nrows(), outlier_kept.len(), |r, p| {
+            affine.t[r]
+                + (0..3)
+                    .map(|k| affine.m_hat[(r, k)] * outlier_affine[(k, p)])
+                    .sum::<f64>()
+        });
+        let mut outlier_model = MetricModel {
+            rotations: model.rotations.clone(),
+            translations: model.translations.clone(),
+            scales: model.scales.clone(),
+            points: vec![Vector3::repeat(f64::NAN); outlier_kept.len()],
+        };
+        outlier_model.triangulate(&outlier_meas);
+
         for w in &warnings {
             timer.observer.on_event(&Event::Warning { message: w });
         }
-        let frames = (0..kept.n_frames())
+        let frames = (0..fit.n_frames())
             .map(|f| {
-                let (mut ss, mut n) = (0.0, 0usize);
-                for p in 0..kept.n_tracks() {
-                    if meas.is_visible(f, p) {
-                        ss += residual2(&model, &meas, f, p);
-                        n += 1;
-                    }
-                }
+                let (ss, n) = frame_residuals(&model, &meas, f);
                 let r = model.rotations[f].matrix();
                 FrameResult {
-                    frame: kept.frame_ids()[f].clone(),
+                    frame: fit.frame_ids()[f].clone(),
                     rotation: std::array::from_fn(|a| std::array::from_fn(|b| r[(a, b)])),
                     translation: [model.translations[f][0], model.translations[f][1]],
                     scale: model.scales[f],
-                    rms_px: if n > 0 {
-                        (ss / (2 * n) as f64).sqrt()
-                    } else {
-                        0.0
-                    },
+                    rms_px: rms_of(ss, n),
                     n_observations: n,
                 }
             })
             .collect();
-        let points = (0..kept.n_tracks())
-            .map(|p| {
-                let (mut ss, mut n) = (0.0, 0usize);
-                for f in 0..kept.n_frames() {
-                    if meas.is_visible(f, p) {
-                        ss += residual2(&model, &meas, f, p);
-                        n += 1;
-                    }
-                }
-                let x = model.points[p];
+        // Points in the input's track order: fitted tracks, then outliers interleaved.
+        let mut points: Vec<(usize, PointResult)> = Vec::with_capacity(used_tracks.len());
+        for (p, &input_p) in used_tracks.iter().enumerate() {
+            let (ss, n) = point_residuals(&model, &meas, p);
+            let x = model.points[p];
+            points.push((
+                input_p,
+                PointResult {
+                    track: fit.track_ids()[p].clone(),
+                    xyz: [x[0], x[1], x[2]],
+                    inlier: true,
+                    rms_px: rms_of(ss, n),
+                    n_observations: n,
+                },
+            ));
+        }
+        for (k, &p) in outlier_kept.iter().enumerate() {
+            let (ss, n) = point_residuals(&outlier_model, &outlier_meas, k);
+            let x = outlier_model.points[k];
+            points.push((
+                kept_tracks[p],
                 PointResult {
                     track: kept.track_ids()[p].clone(),
                     xyz: [x[0], x[1], x[2]],
-                    inlier: true,
-                    rms_px: if n > 0 {
-                        (ss / (2 * n) as f64).sqrt()
-                    } else {
-                        0.0
-                    },
+                    inlier: false,
+                    rms_px: rms_of(ss, n),
                     n_observations: n,
-                }
-            })
-            .collect();
+                },
+            ));
+        }
+        points.sort_by_key(|(i, _)| *i);
+        let outlier_tracks_input: Vec<usize> =
+            outlier_kept.iter().map(|&p| kept_tracks[p]).collect();
         Ok(Reconstruction {
             camera_model: config.camera,
             frames,
-            points,
+            points: points.into_iter().map(|(_, p)| p).collect(),
             rms_px,
             metric_upgrade: upgrade,
             rank_ratio,
             singular_values: affine.singular_values,
             factorization: affine.report,
+            completion: completion_report,
+            robust: robust_report,
             refinement,
             input: InputSummary {
                 frames: table.n_frames(),
                 tracks: table.n_tracks(),
                 observations: table.n_observed(),
                 fill: table.fill(),
-                frames_used: kept.n_frames(),
-                tracks_used: kept.n_tracks(),
+                frames_used: fit.n_frames(),
+                tracks_used: fit.n_tracks(),
             },
             set_aside,
             mirrored,
@@ -417,15 +648,19 @@ impl Reconstruction {
             model,
             affine_structure: affine.s_hat.clone(),
             affine_prediction,
-            kept_frames,
-            kept_tracks,
+            outlier_prediction,
+            outlier_model,
+            kept_frames: used_frames,
+            kept_tracks: used_tracks,
+            outlier_tracks: outlier_tracks_input,
             input_frame_ids: table.frame_ids().to_vec(),
             input_track_ids: table.track_ids().to_vec(),
         })
     }
 
     /// The affine prediction laid out like the input table (2F×N in the input's frame and
-    /// track order); rows/columns of set-aside frames/tracks are NaN.
+    /// track order); rows/columns of set-aside frames/tracks are NaN. Outlier tracks are
+    /// predicted from their own observations given the fitted affine cameras.
     pub fn completed_matrix(&self) -> Mat<f64> {
         let (f, n) = (self.input_frame_ids.len(), self.input_track_ids.len());
         let mut out = Mat::from_fn(2 * f, n, |_, _| f64::NAN);
@@ -433,6 +668,10 @@ impl Reconstruction {
             for (kp, &pi) in self.kept_tracks.iter().enumerate() {
                 out[(2 * fi, pi)] = self.affine_prediction[(2 * kf, kp)];
                 out[(2 * fi + 1, pi)] = self.affine_prediction[(2 * kf + 1, kp)];
+            }
+            for (k, &pi) in self.outlier_tracks.iter().enumerate() {
+                out[(2 * fi, pi)] = self.outlier_prediction[(2 * kf, k)];
+                out[(2 * fi + 1, pi)] = self.outlier_prediction[(2 * kf + 1, k)];
             }
         }
         out
@@ -442,6 +681,123 @@ impl Reconstruction {
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
     }
+}
+
+fn check_size(t: &TrackTable) -> Result<()> {
+    if t.n_frames() < 2 {
+        return Err(Error::TooFew {
+            what: "usable frames (after setting aside under-observed tracks and frames)",
+            needed: 2,
+            have: t.n_frames(),
+        });
+    }
+    if t.n_tracks() < 4 {
+        return Err(Error::TooFew {
+            what: "usable tracks (after setting aside under-observed tracks and frames)",
+            needed: 4,
+            have: t.n_tracks(),
+        });
+    }
+    Ok(())
+}
+
+fn rms_of(ss: f64, n_pairs: usize) -> f64 {
+    if n_pairs > 0 {
+        (ss / (2 * n_pairs) as f64).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// Sum of squared residuals and number of observed pairs among `pairs` (frame, track).
+fn residual_sum(
+    model: &MetricModel,
+    meas: &Measurements,
+    pairs: impl Iterator<Item = (usize, usize)>,
+) -> (f64, usize) {
+    pairs
+        .filter(|&(f, p)| meas.is_visible(f, p))
+        .fold((0.0, 0), |(ss, n), (f, p)| {
+            (ss + residual2(model, meas, f, p), n + 1)
+        })
+}
+
+fn frame_residuals(model: &MetricModel, meas: &Measurements, f: usize) -> (f64, usize) {
+    residual_sum(model, meas, (0..meas.n_points()).map(|p| (f, p)))
+}
+
+fn point_residuals(model: &MetricModel, meas: &Measurements, p: usize) -> (f64, usize) {
+    residual_sum(model, meas, (0..meas.n_frames()).map(|f| (f, p)))
+}
+
+/// Affine factorization from a completion (`W ≈ M̂Ŝ + t1ᵀ` on observed entries). The
+/// singular values reported are those of the centered rank-3 fit `M̂Ŝ`.
+fn factorization_from_completion(meas: &Measurements, c: completion::Completion) -> Result<Affine> {
+    if c.m.ncols() != 3 {
+        return Err(Error::InvalidConfig {
+            field: "completion.model",
+            message: format!(
+                "the metric upgrade needs the affine model (rank 3 + translation), got {:?}",
+                c.model
+            ),
+        });
+    }
+    let pred = c.predict();
+    let rms = meas.rms(pred.as_ref());
+    // σ of M̂Ŝ = σ of R_M R_Sᵀ from thin QRs: 3×3, cheap.
+    let qm = c.m.qr();
+    let st = c.s.transpose().to_owned();
+    let qs = st.qr();
+    let small = qm.R() * qs.R().transpose();
+    let mut singular_values: Vec<f64> = small.singular_values().unwrap_or_default();
+    singular_values.sort_by(|a, b| b.total_cmp(a));
+    Ok(Affine {
+        m_hat: c.m,
+        s_hat: c.s,
+        t: c.t,
+        singular_values,
+        report: FactorizationReport {
+            method: format!("completion ({})", c.solver.name()),
+            svd_method: "none".into(),
+            svd_fallback_reason: None,
+            rms_px: rms,
+        },
+    })
+}
+
+/// Least-squares affine points `ŝ_p = argmin Σ_f ‖M̂_f ŝ + t_f − w_fp‖²` for every track of
+/// `meas` (the same frames as `affine`); NaN for tracks seen in fewer than 2 frames.
+fn affine_points(meas: &Measurements, affine: &Affine) -> Mat<f64> {
+    let mut out = Mat::from_fn(3, meas.n_points(), |_, _| f64::NAN);
+    for p in 0..meas.n_points() {
+        let mut ata = nalgebra::Matrix3::<f64>::zeros();
+        let mut atb = Vector3::<f64>::zeros();
+        let mut n = 0;
+        for f in 0..meas.n_frames() {
+            if !meas.is_visible(f, p) {
+                continue;
+            }
+            n += 1;
+            for r in [2 * f, 2 * f + 1] {
+                let a = Vector3::new(
+                    affine.m_hat[(r, 0)],
+                    affine.m_hat[(r, 1)],
+                    affine.m_hat[(r, 2)],
+                );
+                ata += a * a.transpose();
+                atb += a * (meas.w[(r, p)] - affine.t[r]);
+            }
+        }
+        if n >= 2
+            && let Some(ch) = ata.cholesky()
+        {
+            let x = ch.solve(&atb);
+            for k in 0..3 {
+                out[(k, p)] = x[k];
+            }
+        }
+    }
+    out
 }
 
 fn residual2(model: &MetricModel, meas: &Measurements, f: usize, p: usize) -> f64 {

@@ -6,9 +6,12 @@ use rank3::metric::UpgradeMethod;
 use rank3::synth::{Motion, Shape, SynthConfig, generate};
 use rank3::{CameraModel, Config, Error, Reconstruction, TrackTable};
 
+/// The core pipeline without the robust pass (tested on its own below and in
+/// tests/robust.rs), so these tests measure factorization, upgrade and refinement alone.
 fn config(camera: CameraModel) -> Config {
     Config {
         camera,
+        robust: None,
         ..Config::default()
     }
 }
@@ -213,19 +216,126 @@ fn indefinite_least_squares_takes_the_sdp_path() {
     assert!(found >= 3, "only {found} indefinite cases in 40 seeds");
 }
 
+/// Tracks that enter and leave the frame (40 % missing, contiguous windows) go through the
+/// missing-data solver; noise-free data are still recovered exactly.
 #[test]
-fn missing_entries_without_a_completion_solver_is_a_clear_error() {
+fn missing_entries_are_completed_and_recovered() {
+    for camera in [CameraModel::Orthographic, CameraModel::ScaledOrthographic] {
+        let scene = generate(&SynthConfig {
+            camera,
+            missing: 0.4,
+            noise: 0.0,
+            frames: 20,
+            points: 120,
+            seed: 2,
+            ..Default::default()
+        })
+        .unwrap();
+        assert!(!scene.table.is_complete());
+        let cfg = Config {
+            camera,
+            ..Config::default()
+        };
+        let rec = Reconstruction::from_tracks(&scene.table, &cfg).unwrap();
+        let c = rec.completion.as_ref().expect("completion ran");
+        assert!(c.rms_px < 1e-6, "{camera}: affine rms {}", c.rms_px);
+        assert!(rec.rms_px < 1e-6, "{camera}: rms {}", rec.rms_px);
+        assert_eq!(rec.robust.as_ref().unwrap().n_outlier_tracks, 0);
+        let e = structure_error(&points(&rec), &scene.truth.points);
+        assert!(e < 1e-6, "{camera}: structure error {e}");
+        // completed.txt fills the hidden entries with the true projections.
+        let full = rec.completed_matrix();
+        let mut worst = 0.0f64;
+        for f in 0..20 {
+            for p in 0..120 {
+                let q = scene.truth.project(f, p);
+                worst = worst
+                    .max((full[(2 * f, p)] - q[0]).abs())
+                    .max((full[(2 * f + 1, p)] - q[1]).abs());
+            }
+        }
+        assert!(worst < 1e-5, "{camera}: worst filled-in error {worst} px");
+    }
+}
+
+/// The default pipeline rejects outlier tracks and gross entries, and the structure of the
+/// inliers stays close to the clean-data fit.
+#[test]
+fn robust_pass_rejects_outliers_in_the_pipeline() {
+    let base = SynthConfig {
+        frames: 24,
+        points: 150,
+        noise: 0.5,
+        seed: 5,
+        ..Default::default()
+    };
+    let clean = generate(&base).unwrap();
+    let dirty = generate(&SynthConfig {
+        outliers: 0.2,
+        gross: 0.02,
+        ..base.clone()
+    })
+    .unwrap();
+    let rec_clean = Reconstruction::from_tracks(&clean.table, &Config::default()).unwrap();
+    let rec = Reconstruction::from_tracks(&dirty.table, &Config::default()).unwrap();
+    let robust = rec.robust.as_ref().unwrap();
+    let truth_out: Vec<bool> = dirty.outlier_tracks.iter().map(|o| o.is_some()).collect();
+    let flagged_out: Vec<bool> = rec.points.iter().map(|p| !p.inlier).collect();
+    let tp = truth_out
+        .iter()
+        .zip(&flagged_out)
+        .filter(|(t, f)| **t && **f)
+        .count() as f64;
+    let precision = tp / flagged_out.iter().filter(|&&f| f).count().max(1) as f64;
+    let recall = tp / truth_out.iter().filter(|&&t| t).count() as f64;
+    assert!(
+        precision >= 0.9 && recall >= 0.9,
+        "P {precision} R {recall}"
+    );
+    assert!(robust.n_flagged_entries > 0);
+    // Structure of the true inlier tracks the fit kept, against the truth, relative to the
+    // clean fit's error on the same tracks.
+    let kept: Vec<usize> = (0..150)
+        .filter(|&p| !truth_out[p] && rec.points[p].inlier)
+        .collect();
+    let sel = |r: &Reconstruction| -> Vec<Vector3<f64>> {
+        kept.iter()
+            .map(|&p| Vector3::from(r.points[p].xyz))
+            .collect()
+    };
+    let truth: Vec<Vector3<f64>> = kept.iter().map(|&p| dirty.truth.points[p]).collect();
+    let e_dirty = structure_error(&sel(&rec), &truth);
+    let e_clean = structure_error(&sel(&rec_clean), &truth);
+    assert!(e_dirty <= 1.5 * e_clean, "{e_dirty} vs clean {e_clean}");
+    // Outlier tracks are reported with inlier = false and appear in the JSON.
+    let json: serde_json::Value = serde_json::from_str(&rec.to_json()).unwrap();
+    assert_eq!(
+        json["robust"]["n_outlier_tracks"].as_u64().unwrap() as usize,
+        flagged_out.iter().filter(|&&f| f).count()
+    );
+}
+
+/// Most tracks are random walks: no rigid majority, and the pipeline says so instead of
+/// returning a confident wrong model.
+#[test]
+fn no_rigid_majority_is_an_error_not_a_model() {
     let scene = generate(&SynthConfig {
-        missing: 0.4,
-        seed: 2,
+        frames: 20,
+        points: 100,
+        outliers: 0.7,
+        outlier_kind: rank3::synth::OutlierKind::RandomWalk,
+        seed: 1,
         ..Default::default()
     })
     .unwrap();
     match Reconstruction::from_tracks(&scene.table, &Config::default()) {
-        Err(Error::MissingData {
-            observed, total, ..
-        }) => assert!(observed < total),
-        other => panic!("expected MissingData, got {other:?}"),
+        Err(Error::NoRigidMajority {
+            inlier_fraction, ..
+        }) => assert!(inlier_fraction < 0.6),
+        other => panic!(
+            "expected NoRigidMajority, got {:?}",
+            other.map(|r| r.rms_px)
+        ),
     }
 }
 
@@ -248,7 +358,7 @@ fn under_observed_tracks_and_frames_are_reported() {
     }
     // Make the rest complete again by dropping frame 9's points 0,1 from nothing: the
     // table now has missing entries only in the set-aside track and frame.
-    let rec = Reconstruction::from_tracks(&t, &Config::default()).unwrap();
+    let rec = Reconstruction::from_tracks(&t, &config(CameraModel::Orthographic)).unwrap();
     let ids: Vec<String> = rec
         .set_aside
         .iter()
