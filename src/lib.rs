@@ -28,12 +28,15 @@ pub mod metric;
 pub mod observer;
 pub mod output;
 pub mod reconstruction;
+#[cfg(feature = "rerun")]
+pub mod recording;
 pub mod refine;
 pub mod robust;
 pub mod sdp;
 pub mod solver;
 pub mod svd;
 pub mod synth;
+pub mod track;
 pub mod tracks;
 
 pub use camera::{CameraModel, MetricModel};

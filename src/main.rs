@@ -25,6 +25,10 @@ enum Command {
     Reconstruct(ReconstructArgs),
     /// Write a synthetic scene with ground truth: DIR/tracks.csv and DIR/truth.json.
     Synth(SynthArgs),
+    /// Track corners through a folder of images or a video (KLT) into a track table.
+    Track(TrackArgs),
+    /// Video or images → tracks → reconstruction, in one command.
+    Run(RunArgs),
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -52,15 +56,53 @@ struct ReconstructArgs {
     /// Metric camera model.
     #[arg(long, value_enum, default_value = "orthographic")]
     camera: CameraArg,
+    #[command(flatten)]
+    opts: ReconstructOpts,
+    #[cfg(feature = "rerun")]
+    #[command(flatten)]
+    record: rank3::recording::RecordingArgs,
+}
+
+/// Options of the reconstruction shared by `reconstruct` and `run`.
+#[derive(clap::Args)]
+struct ReconstructOpts {
     /// Skip the Levenberg–Marquardt metric refinement.
     #[arg(long)]
     no_refine: bool,
     /// Always solve the metric upgrade as a PSD-constrained SDP.
     #[arg(long)]
     force_sdp: bool,
-    /// Seed of the randomized SVD.
+    /// Skip the robust pass (RANSAC over tracks, gross-entry flags).
+    #[arg(long)]
+    no_robust: bool,
+    /// Inlier threshold of the robust pass, pixels (default: estimated from the data).
+    #[arg(long, value_name = "PX")]
+    threshold: Option<f64>,
+    /// Missing-data solver: `wiberg` (damped Wiberg / variable projection, reliable) or
+    /// `als` (alternating least squares, simple, can stall).
+    #[arg(long, value_enum, default_value = "wiberg")]
+    solver: SolverArg,
+    /// Start of the missing-data solver: `auto` (data-driven) or `random` (seeded).
+    #[arg(long, value_enum, default_value = "auto")]
+    init: InitArg,
+    /// Random starts of the missing-data solver (the best is kept).
+    #[arg(long, default_value_t = 1)]
+    runs: usize,
+    /// Seed of every random choice (robust sampling, random starts, randomized SVD).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SolverArg {
+    Wiberg,
+    Als,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum InitArg {
+    Auto,
+    Random,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -115,6 +157,9 @@ struct SynthArgs {
     gross: f64,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    #[cfg(feature = "rerun")]
+    #[command(flatten)]
+    record: rank3::recording::RecordingArgs,
 }
 
 fn main() -> ExitCode {
@@ -122,6 +167,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Reconstruct(a) => reconstruct(&a),
         Command::Synth(a) => synth(&a),
+        Command::Track(a) => track_cmd(&a),
+        Command::Run(a) => run_cmd(&a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -133,6 +180,8 @@ fn main() -> ExitCode {
 }
 
 fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
+    #[cfg(feature = "rerun")]
+    let recording = a.record.open("rank3")?;
     let loaded = read_tracks(&a.tracks)?;
     for w in &loaded.warnings {
         eprintln!("warning: {w}");
@@ -146,19 +195,46 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         t.n_observed(),
         100.0 * t.fill()
     );
-    let mut config = Config {
-        camera: a.camera.into(),
-        ..Config::default()
-    };
-    config.svd.seed = a.seed;
-    config.metric.force_sdp = a.force_sdp;
-    if a.no_refine {
-        config.refine = None;
-    }
+    let config = a.opts.config(a.camera);
+    #[cfg(feature = "rerun")]
+    let rec = rank3::recording::reconstruct_recorded(recording.as_ref(), t, &config)?;
+    #[cfg(not(feature = "rerun"))]
     let rec = Reconstruction::from_tracks(t, &config)?;
     let written = rank3::output::write_all(&rec, &a.out)?;
     print_summary(&rec, &written.json, &a.out);
     Ok(())
+}
+
+impl ReconstructOpts {
+    fn config(&self, camera: CameraArg) -> Config {
+        let a = self;
+        let mut config = Config {
+            camera: camera.into(),
+            ..Config::default()
+        };
+        config.svd.seed = a.seed;
+        config.seed = a.seed;
+        config.completion.seed = a.seed;
+        config.completion.runs = a.runs;
+        config.completion.solver = match a.solver {
+            SolverArg::Wiberg => rank3::completion::CompletionSolverKind::Wiberg,
+            SolverArg::Als => rank3::completion::CompletionSolverKind::Als,
+        };
+        config.completion.init = match a.init {
+            InitArg::Auto => rank3::completion::Init::Auto,
+            InitArg::Random => rank3::completion::Init::Random,
+        };
+        if a.no_robust {
+            config.robust = None;
+        } else if let (Some(rc), Some(px)) = (config.robust.as_mut(), a.threshold) {
+            rc.ransac.threshold_px = Some(px);
+        }
+        config.metric.force_sdp = a.force_sdp;
+        if a.no_refine {
+            config.refine = None;
+        }
+        config
+    }
 }
 
 fn print_summary(rec: &Reconstruction, json: &Path, out: &Path) {
@@ -179,6 +255,29 @@ fn print_summary(rec: &Reconstruction, json: &Path, out: &Path) {
         sv.join(" "),
         rec.rank_ratio
     );
+    if let Some(r) = &rec.robust {
+        eprintln!(
+            "robust pass: {} inlier / {} outlier tracks, {} gross entries flagged (σ ≈ {:.3} px, \
+             threshold {:.3} px, {:.2} s)",
+            r.n_inlier_tracks,
+            r.n_outlier_tracks,
+            r.n_flagged_entries,
+            r.noise_sigma_px,
+            r.threshold_px,
+            r.seconds
+        );
+    }
+    if let Some(c) = &rec.completion {
+        eprintln!(
+            "completion: {} ({:?} model) affine RMS {:.6} px, {:?} after {} iterations, {:.2} s",
+            c.solver.name(),
+            c.model,
+            c.rms_px,
+            c.status,
+            c.iterations,
+            c.seconds
+        );
+    }
     eprintln!(
         "affine fit RMS {:.6} px; metric upgrade by {:?} (least-squares L min eigenvalue {:.3e})",
         rec.factorization.rms_px, rec.metric_upgrade.method, rec.metric_upgrade.min_eigenvalue_ls
@@ -228,6 +327,11 @@ fn synth(a: &SynthArgs) -> Result<(), rank3::Error> {
         ..SynthConfig::default()
     };
     let scene = rank3::synth::generate(&cfg)?;
+    #[cfg(feature = "rerun")]
+    if let Some(rec) = a.record.open("rank3")? {
+        rank3::recording::log_input(&rec, &scene.table)?;
+        rank3::recording::log_synth_truth(&rec, &scene)?;
+    }
     std::fs::create_dir_all(&a.out).map_err(|e| rank3::Error::io(&a.out, e))?;
     let tracks = a.out.join("tracks.csv");
     scene.table.write(&tracks)?;
@@ -241,5 +345,245 @@ fn synth(a: &SynthArgs) -> Result<(), rank3::Error> {
         scene.table.n_observed(),
         truth.display()
     );
+    Ok(())
+}
+// ---------------------------------------------------------------- rank3 track / rank3 run
+
+/// Tracking options shared by `rank3 track` and `rank3 run`.
+#[derive(clap::Args)]
+struct TrackOpts {
+    /// Follow these first-frame points (`x y` per line, `#` comments) instead of detecting;
+    /// track ids are the 0-based indices of the point lines.
+    #[arg(long)]
+    init_points: Option<PathBuf>,
+    /// Detect new corners as tracks die (always on without --init-points).
+    #[arg(long)]
+    redetect: bool,
+    /// Maximum number of live tracks (corners detected, strongest first).
+    #[arg(long, default_value_t = 500)]
+    max_features: usize,
+    /// Corner quality relative to the strongest corner's minimum eigenvalue.
+    #[arg(long, default_value_t = 0.01)]
+    quality: f32,
+    /// Minimum distance between corners, pixels.
+    #[arg(long, default_value_t = 8.0)]
+    min_distance: f32,
+    /// Lucas–Kanade window side (odd).
+    #[arg(long, default_value_t = 21)]
+    window: usize,
+    /// Coarsest pyramid level (0 = no pyramid).
+    #[arg(long, default_value_t = 3)]
+    levels: usize,
+    /// Newton iterations per level at most.
+    #[arg(long, default_value_t = 30)]
+    iterations: usize,
+    /// Forward–backward round-trip tolerance, pixels.
+    #[arg(long, default_value_t = 1.0)]
+    fb_threshold: f32,
+    /// Skip the forward–backward check (about twice as fast, less reliable).
+    #[arg(long)]
+    no_fb: bool,
+    /// Largest mean absolute intensity error over the window (intensities in [0, 1]).
+    #[arg(long, default_value_t = 0.06)]
+    max_residual: f32,
+    /// Low-texture threshold: minimum eigenvalue of the gradient matrix / window area.
+    #[arg(long, default_value_t = 1e-4)]
+    min_eigenvalue: f32,
+    /// Lose points closer than this to the border, pixels (default: half the window).
+    #[arg(long)]
+    border_margin: Option<f32>,
+}
+
+impl TrackOpts {
+    fn config(&self) -> rank3::track::TrackerConfig {
+        let mut c = rank3::track::TrackerConfig::default();
+        c.detect.max_features = self.max_features;
+        c.detect.quality_level = self.quality;
+        c.detect.min_distance = self.min_distance;
+        c.klt.window = self.window;
+        c.klt.max_level = self.levels;
+        c.klt.max_iterations = self.iterations;
+        c.klt.fb_threshold = (!self.no_fb).then_some(self.fb_threshold);
+        c.klt.max_residual = self.max_residual;
+        c.klt.min_eigenvalue = self.min_eigenvalue;
+        c.klt.border_margin = self.border_margin;
+        c.redetect_with_points = self.redetect;
+        c
+    }
+}
+
+#[derive(clap::Args)]
+struct TrackArgs {
+    /// A folder of PNG/JPEG frames (natural name order) or a video file (needs ffmpeg).
+    input: PathBuf,
+    /// Output track table: .csv, .txt or .json.
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    opts: TrackOpts,
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    /// A folder of PNG/JPEG frames (natural name order) or a video file (needs ffmpeg).
+    input: PathBuf,
+    /// Output directory (tracks.csv, reconstruction.json, completed.txt, points.ply).
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    opts: TrackOpts,
+    /// Metric camera model.
+    #[arg(long, value_enum, default_value = "scaled-orthographic")]
+    camera: CameraArg,
+    /// Reconstruct from the tracks seen in every frame only (by default the partial
+    /// tracks are used, through the missing-data solver).
+    #[arg(long)]
+    complete_tracks: bool,
+    #[command(flatten)]
+    recon: ReconstructOpts,
+}
+
+fn bar_style(template: &str) -> indicatif::ProgressStyle {
+    indicatif::ProgressStyle::with_template(template)
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+}
+
+/// Tracks `input` with a progress bar; prints a summary to stderr.
+fn track_input(
+    input: &Path,
+    opts: &TrackOpts,
+) -> Result<(rank3::TrackTable, rank3::track::TrackSummary), rank3::Error> {
+    let cfg = opts.config();
+    let init = opts
+        .init_points
+        .as_deref()
+        .map(rank3::track::read_init_points)
+        .transpose()?;
+    let mut src = rank3::track::FrameSource::open(input)?;
+    let bar = match src.len_hint() {
+        Some(n) => indicatif::ProgressBar::new(n as u64).with_style(bar_style(
+            "tracking {bar:30} {pos}/{len} frames ({per_sec}, eta {eta}) {msg}",
+        )),
+        None => indicatif::ProgressBar::new_spinner().with_style(bar_style(
+            "tracking {spinner} {pos} frames ({per_sec}) {msg}",
+        )),
+    };
+    let t0 = std::time::Instant::now();
+    let cpu0 = process_cpu_seconds();
+    let result = rank3::track::track_source(&mut src, &cfg, init, &mut |s| {
+        bar.inc(1);
+        bar.set_message(format!("{} alive", s.alive));
+    });
+    bar.finish_and_clear();
+    let (table, summary) = result?;
+    let wall = t0.elapsed().as_secs_f64();
+    let cpu = process_cpu_seconds().zip(cpu0).map(|(a, b)| a - b);
+    let lost: Vec<String> = summary
+        .lost
+        .iter()
+        .map(|(k, v)| format!("{k} {v}"))
+        .collect();
+    eprintln!(
+        "tracked {} frames: {} tracks started, {} kept, {} alive at the end; lost: {}",
+        summary.frames,
+        summary.started,
+        summary.kept,
+        summary.alive_at_end,
+        if lost.is_empty() {
+            "none".to_string()
+        } else {
+            lost.join(", ")
+        }
+    );
+    eprintln!(
+        "tracking time {:.3} s ({:.1} frames/s), total with decoding {:.3} s ({:.1} frames/s){}",
+        summary.seconds,
+        summary.frames as f64 / summary.seconds.max(1e-9),
+        wall,
+        summary.frames as f64 / wall.max(1e-9),
+        cpu.map_or(String::new(), |c| format!(", CPU {c:.3} s with decoding"))
+    );
+    Ok((table, summary))
+}
+
+/// CPU seconds (user + system, all threads) of this process so far; Linux only.
+fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks = |i: usize| fields.get(i)?.parse::<f64>().ok();
+    // utime and stime (fields 14 and 15 of proc(5)), in clock ticks of 1/100 s.
+    Some((ticks(11)? + ticks(12)?) / 100.0)
+}
+
+fn track_cmd(a: &TrackArgs) -> Result<(), rank3::Error> {
+    // Fail on a bad output extension before the (long) tracking.
+    rank3::tracks::Format::from_path(&a.out)?;
+    let (table, _) = track_input(&a.input, &a.opts)?;
+    table.write(&a.out)?;
+    println!(
+        "wrote {} ({} frames × {} tracks, {} observations, {:.1} % filled)",
+        a.out.display(),
+        table.n_frames(),
+        table.n_tracks(),
+        table.n_observed(),
+        100.0 * table.fill()
+    );
+    Ok(())
+}
+
+/// Ticks a spinner on every pipeline event.
+struct SpinnerObserver(indicatif::ProgressBar);
+
+impl rank3::Observer for SpinnerObserver {
+    fn on_event(&mut self, event: &rank3::Event<'_>) {
+        match event {
+            rank3::Event::StageStarted { stage } => self.0.set_message(stage.to_string()),
+            rank3::Event::Iteration {
+                solver,
+                iteration,
+                rms,
+                ..
+            } => self
+                .0
+                .set_message(format!("{solver} iteration {iteration}, RMS {rms:.4} px")),
+            _ => {}
+        }
+        self.0.tick();
+    }
+}
+
+fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
+    std::fs::create_dir_all(&a.out).map_err(|e| rank3::Error::io(&a.out, e))?;
+    let (mut table, _) = track_input(&a.input, &a.opts)?;
+    let tracks = a.out.join("tracks.csv");
+    table.write(&tracks)?;
+    eprintln!(
+        "wrote {} ({} frames × {} tracks, {:.1} % filled)",
+        tracks.display(),
+        table.n_frames(),
+        table.n_tracks(),
+        100.0 * table.fill()
+    );
+    if a.complete_tracks {
+        let full: Vec<usize> = (0..table.n_tracks())
+            .filter(|&p| table.track_len(p) == table.n_frames())
+            .collect();
+        let frames: Vec<usize> = (0..table.n_frames()).collect();
+        eprintln!(
+            "--complete-tracks: reconstructing from the {} tracks seen in all {} frames",
+            full.len(),
+            table.n_frames()
+        );
+        table = table.select(&frames, &full);
+    }
+    let config = a.recon.config(a.camera);
+    let spinner = indicatif::ProgressBar::new_spinner()
+        .with_style(bar_style("reconstructing {spinner} {elapsed} {msg}"));
+    let mut obs = SpinnerObserver(spinner.clone());
+    let rec = Reconstruction::from_tracks_observed(&table, &config, &mut obs);
+    spinner.finish_and_clear();
+    let rec = rec?;
+    let written = rank3::output::write_all(&rec, &a.out)?;
+    print_summary(&rec, &written.json, &a.out);
     Ok(())
 }

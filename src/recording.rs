@@ -1,0 +1,1067 @@
+//! Rerun recordings of every pipeline stage (cargo feature `rerun`, on by default).
+//!
+//! Open a saved `.rrd` in the Rerun viewer **0.36.3** (the viewer must match the SDK
+//! version: `cargo install rerun-cli --version 0.36.3 --locked` or
+//! `pip install rerun-sdk==0.36.3`, then `rerun file.rrd`) and step through the `stage`
+//! timeline to see why the result is what it is; the `frame` timeline plays per-frame data,
+//! the `iteration` timeline plots solver progress.
+//!
+//! The solvers know nothing about Rerun: they report to an [`crate::Observer`], and
+//! [`RecordingObserver`] turns those events into log calls. [`log_input`],
+//! [`log_reconstruction`], [`log_robust`] and [`log_synth_truth`] log the data of a run.
+//!
+//! # Timelines
+//!
+//! * `stage` (sequence): [`STAGES`] gives the index of each stage — 0 input, 1 set-aside,
+//!   2 robust, 3 factorize, 4 metric-upgrade, 5 refine, 6 result. Stages the table does not
+//!   know get indices after it, in order of appearance.
+//! * `frame` (sequence): the frame's index in the *input* table (not its id).
+//! * `iteration` (sequence): solver iteration.
+//!
+//! # Entity paths ([`paths`])
+//!
+//! | path | archetype | what |
+//! |---|---|---|
+//! | `image/tracks` | Points2D per frame | observed positions, class id = track index |
+//! | `image/trajectories` | LineStrips2D | one strip per input track |
+//! | `image/set_aside/{points,trajectories}` | Points2D / LineStrips2D | set-aside tracks, red |
+//! | `image/residuals` | Arrows2D per frame | observed → predicted (metric model) |
+//! | `image/robust/{inliers,outliers,flagged}` | LineStrips2D / Points2D | robust pass |
+//! | `factorization/visibility` | Image (L8) | F×N mask, white = observed |
+//! | `factorization/W` | Tensor (f32) | the kept 2F'×N' measurement matrix |
+//! | `factorization/singular_values` | BarChart | every computed σ |
+//! | `factorization/sigma4_over_sigma3` | Scalars | rank diagnostic |
+//! | `affine/points` | Points3D | affine structure Ŝ (before the upgrade) |
+//! | `metric/eigenvalues_ls`, `metric/eigenvalues` | BarChart | eigenvalues of L |
+//! | `metric/method` | TextDocument | which path solved L and why |
+//! | `world/points` | Points3D | metric structure, coloured by per-point RMS |
+//! | `world/camera` | Transform3D per frame | camera pose (axes = rows of R) |
+//! | `world/camera/axes` | Arrows3D (static) | i (red), j (green), viewing direction k (blue) |
+//! | `world/cameras/view_directions` | Arrows3D | every frame's viewing direction |
+//! | `world/cameras/trajectory` | LineStrips3D | camera centres in frame order |
+//! | `residuals/point_rms` | BarChart | per-point RMS, pixels |
+//! | `residuals/frame_rms` | Scalars per frame | per-frame RMS, pixels |
+//! | `solver/<name>/run<k>/{cost,rms,lambda}` | Scalars per iteration | solver progress |
+//! | `log/stages`, `log/warnings`, `log/set_aside`, `log/errors` | TextLog | events |
+//! | `summary` | TextDocument (markdown) | inputs, choices, timings, warnings |
+//!
+//! # Size limits
+//!
+//! Images and tensors are subsampled (every k-th row/column) so that neither side exceeds
+//! [`RecordingOptions::max_image_side`]; residual arrows are capped per frame by
+//! [`RecordingOptions::max_residual_arrows_per_frame`] (evenly spaced tracks). Both are
+//! generous by default; see the crate README for measured file sizes and overhead.
+//!
+//! Cost: O(F·N) for the per-frame data (points, arrows, mask, W), O(N + F) for the rest.
+
+use std::path::PathBuf;
+
+use rerun::external::re_uri;
+use rerun::sink::LogSink;
+use rerun::{
+    AnnotationContext, Arrows2D, Arrows3D, BarChart, ClassDescription, Image, LineStrip2D,
+    LineStrip3D, LineStrips2D, LineStrips3D, Points2D, Points3D, Radius, RecordingStream,
+    RecordingStreamBuilder, RecordingStreamError, Scalars, Tensor, TensorBuffer, TensorData,
+    TextDocument, TextLog, TextLogLevel, Transform3D,
+};
+
+use crate::metric::UpgradeMethod;
+use crate::synth::SynthScene;
+use crate::tracks::SetAsideKind;
+use crate::{Config, Error, Event, MetricModel, Observer, Reconstruction, TrackTable};
+
+/// Stage names in `stage`-timeline order (their index is the timeline value).
+pub const STAGES: [&str; 7] = [
+    "input",
+    "set-aside",
+    "robust",
+    "factorize",
+    "metric-upgrade",
+    "refine",
+    "result",
+];
+
+/// Timeline names.
+pub const TIMELINE_STAGE: &str = "stage";
+/// Per-frame data; the value is the frame's index in the input table.
+pub const TIMELINE_FRAME: &str = "frame";
+/// Solver iterations.
+pub const TIMELINE_ITERATION: &str = "iteration";
+
+/// Entity paths used by this module.
+pub mod paths {
+    pub const TRACKS: &str = "image/tracks";
+    pub const TRAJECTORIES: &str = "image/trajectories";
+    pub const SET_ASIDE_POINTS: &str = "image/set_aside/points";
+    pub const SET_ASIDE_TRAJECTORIES: &str = "image/set_aside/trajectories";
+    pub const RESIDUAL_ARROWS: &str = "image/residuals";
+    pub const ROBUST_INLIERS: &str = "image/robust/inliers";
+    pub const ROBUST_OUTLIERS: &str = "image/robust/outliers";
+    pub const ROBUST_FLAGGED: &str = "image/robust/flagged";
+    pub const ROBUST_INLIER_COUNT: &str = "solver/ransac/inliers";
+    pub const VISIBILITY: &str = "factorization/visibility";
+    pub const W: &str = "factorization/W";
+    pub const SINGULAR_VALUES: &str = "factorization/singular_values";
+    pub const RANK_RATIO: &str = "factorization/sigma4_over_sigma3";
+    pub const AFFINE_POINTS: &str = "affine/points";
+    pub const EIGENVALUES_LS: &str = "metric/eigenvalues_ls";
+    pub const EIGENVALUES: &str = "metric/eigenvalues";
+    pub const METRIC_METHOD: &str = "metric/method";
+    pub const POINTS: &str = "world/points";
+    pub const CAMERA: &str = "world/camera";
+    pub const CAMERA_AXES: &str = "world/camera/axes";
+    pub const VIEW_DIRECTIONS: &str = "world/cameras/view_directions";
+    pub const CAMERA_TRAJECTORY: &str = "world/cameras/trajectory";
+    pub const POINT_RMS: &str = "residuals/point_rms";
+    pub const FRAME_RMS: &str = "residuals/frame_rms";
+    pub const LOG_STAGES: &str = "log/stages";
+    pub const LOG_WARNINGS: &str = "log/warnings";
+    pub const LOG_SET_ASIDE: &str = "log/set_aside";
+    pub const LOG_ERRORS: &str = "log/errors";
+    pub const SUMMARY: &str = "summary";
+    pub const TRUTH_POINTS: &str = "truth/points";
+    /// Ground-truth cameras; same layout as `world/camera…` under `truth/`.
+    pub const TRUTH_ROOT: &str = "truth";
+}
+
+/// What went wrong while recording.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RecordingError {
+    /// The Rerun SDK refused (file not creatable, viewer not spawnable, bad URL, …).
+    #[error("rerun recording: {0}")]
+    Stream(#[from] RecordingStreamError),
+    /// The data handed to a log function do not fit together.
+    #[error(transparent)]
+    Input(#[from] Error),
+}
+
+/// Result of the log functions.
+pub type RecordingResult<T = ()> = std::result::Result<T, RecordingError>;
+
+impl From<RecordingError> for Error {
+    /// Input errors unchanged; SDK failures as an [`Error::Io`] on the recording.
+    fn from(e: RecordingError) -> Self {
+        match e {
+            RecordingError::Input(e) => e,
+            RecordingError::Stream(e) => {
+                Error::io("rerun recording", std::io::Error::other(e.to_string()))
+            }
+        }
+    }
+}
+
+/// Size limits of what gets logged. Defaults keep everything for tables up to 4096 frames
+/// or tracks per side.
+#[derive(Debug, Clone)]
+pub struct RecordingOptions {
+    /// Images and tensors larger than this on a side are subsampled. Default 4096.
+    pub max_image_side: usize,
+    /// At most this many residual arrows per frame (evenly spaced over the kept tracks).
+    /// Default 5000.
+    pub max_residual_arrows_per_frame: usize,
+    /// Tracks get an annotation context (class id → track id label) up to this many
+    /// tracks (class ids are 16-bit). Default 65535.
+    pub max_annotated_tracks: usize,
+}
+
+impl Default for RecordingOptions {
+    fn default() -> Self {
+        Self {
+            max_image_side: 4096,
+            max_residual_arrows_per_frame: 5000,
+            max_annotated_tracks: 65535,
+        }
+    }
+}
+
+/// Where a CLI run sends its recording. At least one of the three enables recording.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct RecordingArgs {
+    /// Save a Rerun recording of every stage to this .rrd file (open with Rerun viewer 0.36.3).
+    #[arg(long, value_name = "FILE")]
+    pub rrd: Option<PathBuf>,
+    /// Spawn a Rerun viewer (`rerun` 0.36.3 on PATH) and stream the recording to it.
+    #[arg(long)]
+    pub spawn: bool,
+    /// Stream the recording to a running viewer (default rerun+http://127.0.0.1:9876/proxy).
+    #[arg(long, value_name = "URL", num_args = 0..=1,
+          default_missing_value = rerun::DEFAULT_CONNECT_URL)]
+    pub connect: Option<String>,
+}
+
+impl RecordingArgs {
+    /// Opens the requested sinks (creating the .rrd's directory); `None` when none was
+    /// requested.
+    pub fn open(&self, application_id: &'static str) -> RecordingResult<Option<RecordingStream>> {
+        if let Some(dir) = self.rrd.as_deref().and_then(std::path::Path::parent)
+            && !dir.as_os_str().is_empty()
+        {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        }
+        let builder = RecordingStreamBuilder::new(application_id);
+        match (&self.rrd, self.spawn, &self.connect) {
+            (None, false, None) => return Ok(None),
+            (Some(path), false, None) => return Ok(Some(builder.save(path)?)),
+            _ => {}
+        }
+        let mut sinks: Vec<Box<dyn LogSink>> = Vec::new();
+        if let Some(path) = &self.rrd {
+            sinks.push(Box::new(
+                rerun::sink::FileSink::new(path).map_err(RecordingStreamError::from)?,
+            ));
+        }
+        let mut urls = Vec::new();
+        if self.spawn {
+            let info = rerun::spawn(&rerun::SpawnOptions::default())
+                .map_err(RecordingStreamError::from)?;
+            urls.push(format!("rerun+http://127.0.0.1:{}/proxy", info.port));
+        }
+        if let Some(url) = &self.connect {
+            urls.push(url.clone());
+        }
+        for url in urls {
+            let re_uri::RedapUri::Proxy(uri) = url
+                .parse::<re_uri::RedapUri>()
+                .map_err(RecordingStreamError::from)?
+            else {
+                return Err(RecordingStreamError::NotAProxyEndpoint.into());
+            };
+            sinks.push(Box::new(rerun::sink::GrpcSink::new(uri)));
+        }
+        Ok(Some(builder.set_sinks(sinks)?))
+    }
+}
+
+/// Runs [`Reconstruction::from_tracks_observed`] with everything logged to `rec` when given:
+/// the input ([`log_input`]), stage events, solver iterations and warnings
+/// ([`RecordingObserver`]), then the result ([`log_reconstruction`]) or the error
+/// ([`log_error`]). Without `rec` it is [`Reconstruction::from_tracks`]. Failed log calls
+/// inside the pipeline are reported as a warning in the result.
+pub fn reconstruct_recorded(
+    rec: Option<&RecordingStream>,
+    table: &TrackTable,
+    config: &Config,
+) -> RecordingResult<Reconstruction> {
+    let Some(rec) = rec else {
+        return Ok(Reconstruction::from_tracks(table, config)?);
+    };
+    log_input(rec, table)?;
+    let mut observer = RecordingObserver::new(rec);
+    match Reconstruction::from_tracks_observed(table, config, &mut observer) {
+        Ok(mut result) => {
+            if let (n @ 1.., Some(first)) = observer.errors() {
+                result
+                    .warnings
+                    .push(format!("recording: {n} log call(s) failed, first: {first}"));
+            }
+            log_reconstruction(rec, table, &result)?;
+            if let Some(r) = &result.robust {
+                let mut inliers = vec![false; table.n_tracks()];
+                for &p in &result.kept_tracks {
+                    inliers[p] = true;
+                }
+                log_robust(
+                    rec,
+                    table,
+                    &inliers,
+                    &r.flagged_indices,
+                    &r.inliers_per_iteration,
+                )?;
+            }
+            Ok(result)
+        }
+        Err(e) => {
+            log_error(rec, &e)?;
+            Err(e.into())
+        }
+    }
+}
+
+/// The `stage`-timeline index of a named stage (see [`STAGES`]); `None` for unknown names.
+pub fn stage_index(stage: &str) -> Option<i64> {
+    match stage {
+        "complete" => Some(3),
+        _ => STAGES.iter().position(|s| *s == stage).map(|i| i as i64),
+    }
+}
+
+/// Sets the `stage` timeline and clears `frame` and `iteration`.
+fn at_stage(rec: &RecordingStream, stage: &str) {
+    rec.set_time_sequence(
+        TIMELINE_STAGE,
+        stage_index(stage).unwrap_or(STAGES.len() as i64),
+    );
+    rec.disable_timeline(TIMELINE_FRAME);
+    rec.disable_timeline(TIMELINE_ITERATION);
+}
+
+/// Turns [`Event`]s into Rerun log calls: iterations become `Scalars` on the `iteration`
+/// timeline (`solver/<name>/run<k>/{cost,rms,lambda}`), stage events `TextLog`s on
+/// `log/stages` at the stage's `stage`-timeline index, warnings `TextLog`s (level WARN)
+/// on `log/warnings`. Logging errors cannot be returned from an observer; they are counted
+/// and the first is kept ([`RecordingObserver::first_error`]).
+///
+/// Cost: O(1) per event (a few small log calls).
+pub struct RecordingObserver {
+    rec: RecordingStream,
+    unknown_stages: Vec<String>,
+    stage: i64,
+    errors: usize,
+    first_error: Option<String>,
+}
+
+impl RecordingObserver {
+    /// An observer logging to `rec` (the stream is shared, not consumed).
+    pub fn new(rec: &RecordingStream) -> Self {
+        Self {
+            rec: rec.clone(),
+            unknown_stages: Vec::new(),
+            stage: 0,
+            errors: 0,
+            first_error: None,
+        }
+    }
+
+    /// Number of log calls that failed, and the first failure.
+    pub fn errors(&self) -> (usize, Option<&str>) {
+        (self.errors, self.first_error.as_deref())
+    }
+
+    /// The first logging failure, if any.
+    pub fn first_error(&self) -> Option<&str> {
+        self.first_error.as_deref()
+    }
+
+    fn stage_of(&mut self, stage: &str) -> i64 {
+        if let Some(i) = stage_index(stage) {
+            return i;
+        }
+        let k = match self.unknown_stages.iter().position(|s| s == stage) {
+            Some(k) => k,
+            None => {
+                self.unknown_stages.push(stage.to_string());
+                self.unknown_stages.len() - 1
+            }
+        };
+        (STAGES.len() + k) as i64
+    }
+
+    fn handle(&mut self, event: &Event<'_>) -> Result<(), RecordingStreamError> {
+        let rec = &self.rec;
+        match event {
+            Event::StageStarted { stage } => {
+                self.stage = self.stage_of(stage);
+                let rec = &self.rec;
+                rec.set_time_sequence(TIMELINE_STAGE, self.stage);
+                rec.disable_timeline(TIMELINE_FRAME);
+                rec.disable_timeline(TIMELINE_ITERATION);
+                rec.log(
+                    paths::LOG_STAGES,
+                    &TextLog::new(format!("stage {stage} started")).with_level(TextLogLevel::INFO),
+                )
+            }
+            Event::StageFinished { stage, seconds } => {
+                rec.set_time_sequence(TIMELINE_STAGE, self.stage);
+                rec.disable_timeline(TIMELINE_ITERATION);
+                rec.log(
+                    paths::LOG_STAGES,
+                    &TextLog::new(format!("stage {stage} finished in {seconds:.4} s"))
+                        .with_level(TextLogLevel::INFO),
+                )
+            }
+            Event::Iteration {
+                solver,
+                run,
+                iteration,
+                cost,
+                rms,
+                lambda,
+            } => {
+                rec.set_time_sequence(TIMELINE_STAGE, self.stage);
+                rec.set_time_sequence(TIMELINE_ITERATION, *iteration as i64);
+                let base = format!("solver/{solver}/run{run}");
+                rec.log(format!("{base}/cost"), &Scalars::single(*cost))?;
+                rec.log(format!("{base}/rms"), &Scalars::single(*rms))?;
+                if lambda.is_finite() {
+                    rec.log(format!("{base}/lambda"), &Scalars::single(*lambda))?;
+                }
+                Ok(())
+            }
+            Event::Warning { message } => {
+                rec.disable_timeline(TIMELINE_ITERATION);
+                rec.log(
+                    paths::LOG_WARNINGS,
+                    &TextLog::new(*message).with_level(TextLogLevel::WARN),
+                )
+            }
+            // Events added later are not recorded until this observer learns them.
+            #[allow(unreachable_patterns)]
+            _ => Ok(()),
+        }
+    }
+}
+
+impl Observer for RecordingObserver {
+    fn on_event(&mut self, event: &Event<'_>) {
+        if let Err(e) = self.handle(event) {
+            self.errors += 1;
+            if self.first_error.is_none() {
+                self.first_error = Some(e.to_string());
+            }
+        }
+    }
+}
+
+fn f2(p: [f64; 2]) -> [f32; 2] {
+    [p[0] as f32, p[1] as f32]
+}
+
+fn f3(x: &nalgebra::Vector3<f64>) -> [f32; 3] {
+    [x[0] as f32, x[1] as f32, x[2] as f32]
+}
+
+fn class_id(p: usize) -> u16 {
+    (p % 65536) as u16
+}
+
+const RED: [u8; 3] = [230, 40, 40];
+const GREEN: [u8; 3] = [40, 190, 60];
+const ORANGE: [u8; 3] = [255, 150, 0];
+const GREY: [u8; 3] = [150, 150, 150];
+
+/// Green (0) → yellow (0.5) → red (1).
+fn heat(t: f64) -> [u8; 3] {
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
+    if t < 0.5 {
+        [(510.0 * t) as u8, 200, 40]
+    } else {
+        [255, (200.0 * (2.0 - 2.0 * t)) as u8, 40]
+    }
+}
+
+/// A track's observed positions in frame order (gaps bridged).
+fn trajectory(table: &TrackTable, p: usize) -> LineStrip2D {
+    LineStrip2D::from_iter((0..table.n_frames()).filter_map(|f| table.get(f, p).map(f2)))
+}
+
+/// Logs the input table: per-frame observed points on `image/tracks` (class id = track
+/// index, with an annotation context mapping it to the track id), and one trajectory per
+/// track on `image/trajectories`, at stage `input`.
+///
+/// Cost: O(F·N).
+pub fn log_input(rec: &RecordingStream, table: &TrackTable) -> RecordingResult {
+    log_input_with(rec, table, &RecordingOptions::default())
+}
+
+/// [`log_input`] with explicit [`RecordingOptions`].
+pub fn log_input_with(
+    rec: &RecordingStream,
+    table: &TrackTable,
+    options: &RecordingOptions,
+) -> RecordingResult {
+    at_stage(rec, "input");
+    let n = table.n_tracks();
+    if n <= options.max_annotated_tracks.min(65535) {
+        let ctx =
+            AnnotationContext::new(table.track_ids().iter().enumerate().map(|(p, id)| {
+                ClassDescription::from((class_id(p), format!("track {id}").as_str()))
+            }));
+        rec.log_static("image", &ctx)?;
+        rec.log_static("world", &ctx)?;
+        rec.log_static("affine", &ctx)?;
+        rec.log_static(paths::TRUTH_ROOT, &ctx)?;
+    }
+    rec.log(
+        paths::TRAJECTORIES,
+        &LineStrips2D::new((0..n).map(|p| trajectory(table, p)))
+            .with_class_ids((0..n).map(class_id)),
+    )?;
+    for f in 0..table.n_frames() {
+        rec.set_time_sequence(TIMELINE_FRAME, f as i64);
+        let (pos, ids): (Vec<[f32; 2]>, Vec<u16>) = (0..n)
+            .filter_map(|p| table.get(f, p).map(|xy| (f2(xy), class_id(p))))
+            .unzip();
+        rec.log(
+            paths::TRACKS,
+            &Points2D::new(pos)
+                .with_class_ids(ids)
+                .with_radii([Radius::new_ui_points(2.0)]),
+        )?;
+    }
+    rec.disable_timeline(TIMELINE_FRAME);
+    Ok(())
+}
+
+/// Every-k-th index so that at most `max` remain.
+fn subsample(len: usize, max: usize) -> Vec<usize> {
+    let max = max.max(1);
+    let step = len.div_ceil(max).max(1);
+    (0..len).step_by(step).collect()
+}
+
+/// Logs everything a finished run explains itself with (see the module table): set-aside
+/// tracks, the visibility mask and W, the singular values and σ4/σ3, the affine and metric
+/// structure, L's eigenvalues and the upgrade path, the cameras, the residuals and a
+/// markdown summary. `table` must be the table the reconstruction was computed from.
+///
+/// Cost: O(F·N).
+pub fn log_reconstruction(
+    rec: &RecordingStream,
+    table: &TrackTable,
+    result: &Reconstruction,
+) -> RecordingResult {
+    log_reconstruction_with(rec, table, result, &RecordingOptions::default())
+}
+
+/// [`log_reconstruction`] with explicit [`RecordingOptions`].
+pub fn log_reconstruction_with(
+    rec: &RecordingStream,
+    table: &TrackTable,
+    result: &Reconstruction,
+    options: &RecordingOptions,
+) -> RecordingResult {
+    check_consistent(table, result)?;
+    log_set_aside(rec, table, result)?;
+    log_factorization(rec, table, result, options)?;
+    log_metric(rec, result)?;
+    log_residuals(rec, table, result, options)?;
+    at_stage(rec, "result");
+    rec.log(
+        paths::SUMMARY,
+        &TextDocument::from_markdown(summary_markdown(result)),
+    )?;
+    Ok(())
+}
+
+fn check_consistent(table: &TrackTable, r: &Reconstruction) -> RecordingResult {
+    let (fk, nk) = (r.kept_frames.len(), r.kept_tracks.len());
+    let bad = r.input_frame_ids.len() != table.n_frames()
+        || r.input_track_ids.len() != table.n_tracks()
+        || r.model.n_frames() != fk
+        || r.model.n_points() != nk
+        || r.affine_structure.ncols() != nk
+        || r.points.len() != nk
+        || r.frames.len() != fk
+        || r.kept_frames.iter().any(|&f| f >= table.n_frames())
+        || r.kept_tracks.iter().any(|&p| p >= table.n_tracks());
+    if bad {
+        return Err(Error::Dimension {
+            context: "recording::log_reconstruction (table vs reconstruction)",
+            expected: format!(
+                "a reconstruction of a {}×{} table",
+                table.n_frames(),
+                table.n_tracks()
+            ),
+            got: format!(
+                "one of a {}×{} table with {} kept frames and {} kept tracks",
+                r.input_frame_ids.len(),
+                r.input_track_ids.len(),
+                fk,
+                nk
+            ),
+        }
+        .into());
+    }
+    Ok(())
+}
+
+fn log_set_aside(rec: &RecordingStream, table: &TrackTable, r: &Reconstruction) -> RecordingResult {
+    at_stage(rec, "set-aside");
+    let mut kept = vec![false; table.n_tracks()];
+    for &p in &r.kept_tracks {
+        kept[p] = true;
+    }
+    let aside: Vec<usize> = (0..table.n_tracks()).filter(|&p| !kept[p]).collect();
+    for s in &r.set_aside {
+        let what = match s.kind {
+            SetAsideKind::Track => "track",
+            SetAsideKind::Frame => "frame",
+        };
+        rec.log(
+            paths::LOG_SET_ASIDE,
+            &TextLog::new(format!("set aside {what} {}: {}", s.id, s.reason))
+                .with_level(TextLogLevel::INFO),
+        )?;
+    }
+    if aside.is_empty() {
+        return Ok(());
+    }
+    rec.log(
+        paths::SET_ASIDE_TRAJECTORIES,
+        &LineStrips2D::new(aside.iter().map(|&p| trajectory(table, p)))
+            .with_colors([RED])
+            .with_labels(
+                aside
+                    .iter()
+                    .map(|&p| format!("set aside: track {}", table.track_ids()[p])),
+            ),
+    )?;
+    for f in 0..table.n_frames() {
+        rec.set_time_sequence(TIMELINE_FRAME, f as i64);
+        let pos: Vec<[f32; 2]> = aside
+            .iter()
+            .filter_map(|&p| table.get(f, p).map(f2))
+            .collect();
+        rec.log(
+            paths::SET_ASIDE_POINTS,
+            &Points2D::new(pos)
+                .with_colors([RED])
+                .with_radii([Radius::new_ui_points(3.0)]),
+        )?;
+    }
+    rec.disable_timeline(TIMELINE_FRAME);
+    Ok(())
+}
+
+fn log_factorization(
+    rec: &RecordingStream,
+    table: &TrackTable,
+    r: &Reconstruction,
+    options: &RecordingOptions,
+) -> RecordingResult {
+    at_stage(rec, "factorize");
+    // Visibility mask of the whole input table.
+    let rows = subsample(table.n_frames(), options.max_image_side);
+    let cols = subsample(table.n_tracks(), options.max_image_side);
+    let mut mask = Vec::with_capacity(rows.len() * cols.len());
+    for &f in &rows {
+        for &p in &cols {
+            mask.push(if table.is_visible(f, p) { 255u8 } else { 0 });
+        }
+    }
+    rec.log(
+        paths::VISIBILITY,
+        &Image::from_l8(mask, [cols.len() as u32, rows.len() as u32]),
+    )?;
+    // W of the kept frames and tracks (rows x0, y0, x1, y1, …), NaN where unobserved.
+    let frames = subsample(r.kept_frames.len(), options.max_image_side / 2);
+    let tracks = subsample(r.kept_tracks.len(), options.max_image_side);
+    let mut w = Vec::with_capacity(2 * frames.len() * tracks.len());
+    for &kf in &frames {
+        for c in 0..2 {
+            for &kp in &tracks {
+                let v = table.get(r.kept_frames[kf], r.kept_tracks[kp]);
+                w.push(v.map_or(f32::NAN, |xy| xy[c] as f32));
+            }
+        }
+    }
+    let w = TensorData::new(
+        vec![2 * frames.len() as u64, tracks.len() as u64],
+        TensorBuffer::F32(w.into()),
+    )
+    .with_dim_names(["row (2·frame + x|y)", "track"]);
+    rec.log(paths::W, &Tensor::new(w))?;
+    rec.log(
+        paths::SINGULAR_VALUES,
+        &BarChart::new(r.singular_values.clone()),
+    )?;
+    if r.rank_ratio.is_finite() {
+        rec.log(paths::RANK_RATIO, &Scalars::single(r.rank_ratio))?;
+    }
+    let s = &r.affine_structure;
+    rec.log(
+        paths::AFFINE_POINTS,
+        &Points3D::new(
+            (0..s.ncols()).map(|p| [s[(0, p)] as f32, s[(1, p)] as f32, s[(2, p)] as f32]),
+        )
+        .with_class_ids(r.kept_tracks.iter().map(|&p| class_id(p))),
+    )?;
+    Ok(())
+}
+
+/// Camera centre placed back along the viewing direction `k` (scaled orthographic: by
+/// `1/s`, since magnification is inversely proportional to depth).
+fn camera_centre(model: &MetricModel, f: usize, d: f64) -> nalgebra::Vector3<f64> {
+    let k = model.rotations[f].matrix().row(2).transpose();
+    let s = model.scales[f];
+    let s = if s.is_finite() && s > 0.0 { s } else { 1.0 };
+    -k * (d / s)
+}
+
+/// A viewing distance: twice the largest distance of a point from the centroid (≥ 1e-9).
+fn scene_distance(model: &MetricModel) -> f64 {
+    let n = model.points.len().max(1) as f64;
+    let c = model
+        .points
+        .iter()
+        .fold(nalgebra::Vector3::zeros(), |a, p| a + p)
+        / n;
+    let r = model
+        .points
+        .iter()
+        .map(|p| (p - c).norm())
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    if r > 0.0 { 2.0 * r } else { 1.0 }
+}
+
+/// Cameras of `model` under `base` (`world` or `truth`): a Transform3D per frame on
+/// `<base>/camera` (frame timeline value `frame_index[f]`), static camera-local axes on
+/// `<base>/camera/axes`, all viewing directions and the centre trajectory under
+/// `<base>/cameras/`.
+fn log_cameras(
+    rec: &RecordingStream,
+    base: &str,
+    model: &MetricModel,
+    frame_index: &[usize],
+) -> RecordingResult {
+    let d = scene_distance(model);
+    let centres: Vec<nalgebra::Vector3<f64>> = (0..model.n_frames())
+        .map(|f| camera_centre(model, f, d))
+        .collect();
+    let axis = (0.25 * d) as f32;
+    rec.log_static(
+        format!("{base}/camera/axes"),
+        &Arrows3D::from_vectors([[axis, 0.0, 0.0], [0.0, axis, 0.0], [0.0, 0.0, 2.0 * axis]])
+            .with_colors([RED, GREEN, [60, 90, 255]])
+            .with_labels(["i", "j", "k (view)"]),
+    )?;
+    rec.log(
+        format!("{base}/cameras/view_directions"),
+        &Arrows3D::from_vectors((0..model.n_frames()).map(|f| {
+            let k = model.rotations[f].matrix().row(2).transpose();
+            f3(&(k * (0.5 * d)))
+        }))
+        .with_origins(centres.iter().map(f3))
+        .with_colors([[60, 90, 255]]),
+    )?;
+    rec.log(
+        format!("{base}/cameras/trajectory"),
+        &LineStrips3D::new([LineStrip3D::from_iter(centres.iter().map(f3))]).with_colors([GREY]),
+    )?;
+    for f in 0..model.n_frames() {
+        rec.set_time_sequence(TIMELINE_FRAME, frame_index[f] as i64);
+        let r = model.rotations[f].matrix();
+        // Columns of the camera-to-world rotation are the camera axes i, j, k (rows of R).
+        let cols: [[f32; 3]; 3] =
+            std::array::from_fn(|a| std::array::from_fn(|b| r[(a, b)] as f32));
+        rec.log(
+            format!("{base}/camera"),
+            &Transform3D::from_translation_mat3x3(f3(&centres[f]), cols),
+        )?;
+    }
+    rec.disable_timeline(TIMELINE_FRAME);
+    Ok(())
+}
+
+fn upgrade_text(r: &Reconstruction) -> String {
+    let u = &r.metric_upgrade;
+    let mut s = format!(
+        "## Metric upgrade\n\nSolved `L = QQᵀ` by **{}**.\n\n\
+         * eigenvalues of the least-squares L: {:.4e}, {:.4e}, {:.4e}\n\
+         * eigenvalues of the L used: {:.4e}, {:.4e}, {:.4e}\n\
+         * constraint RMS at the L used: {:.3e}\n",
+        match u.method {
+            UpgradeMethod::LeastSquares => "linear least squares (L positive definite)",
+            UpgradeMethod::Sdp => "the PSD-constrained SDP",
+        },
+        u.eigenvalues_ls[0],
+        u.eigenvalues_ls[1],
+        u.eigenvalues_ls[2],
+        u.eigenvalues[0],
+        u.eigenvalues[1],
+        u.eigenvalues[2],
+        u.constraint_rms
+    );
+    if u.method == UpgradeMethod::Sdp {
+        s.push_str(&format!(
+            "* why: the least-squares L's smallest eigenvalue is {:.3e} (not positive definite, \
+             or forced)\n* SDP status: {}, {} iterations\n",
+            u.min_eigenvalue_ls,
+            u.sdp_status.as_deref().unwrap_or("?"),
+            u.sdp_iterations.map_or("?".into(), |i| i.to_string())
+        ));
+    }
+    s
+}
+
+fn log_metric(rec: &RecordingStream, r: &Reconstruction) -> RecordingResult {
+    at_stage(rec, "metric-upgrade");
+    let u = &r.metric_upgrade;
+    rec.log(
+        paths::EIGENVALUES_LS,
+        &BarChart::new(u.eigenvalues_ls.to_vec()),
+    )?;
+    rec.log(paths::EIGENVALUES, &BarChart::new(u.eigenvalues.to_vec()))?;
+    rec.log(
+        paths::METRIC_METHOD,
+        &TextDocument::from_markdown(upgrade_text(r)),
+    )?;
+    let max_rms = r
+        .points
+        .iter()
+        .map(|p| p.rms_px)
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    rec.log(
+        paths::POINTS,
+        &Points3D::new(r.model.points.iter().map(f3))
+            .with_colors(r.points.iter().map(|p| {
+                heat(if max_rms > 0.0 {
+                    p.rms_px / max_rms
+                } else {
+                    0.0
+                })
+            }))
+            .with_class_ids(r.kept_tracks.iter().map(|&p| class_id(p))),
+    )?;
+    log_cameras(rec, "world", &r.model, &r.kept_frames)
+}
+
+fn log_residuals(
+    rec: &RecordingStream,
+    table: &TrackTable,
+    r: &Reconstruction,
+    options: &RecordingOptions,
+) -> RecordingResult {
+    at_stage(rec, "refine");
+    rec.log(
+        paths::POINT_RMS,
+        &BarChart::new(r.points.iter().map(|p| p.rms_px).collect::<Vec<f64>>()),
+    )?;
+    let tracks = subsample(r.kept_tracks.len(), options.max_residual_arrows_per_frame);
+    for (kf, &fi) in r.kept_frames.iter().enumerate() {
+        rec.set_time_sequence(TIMELINE_FRAME, fi as i64);
+        let mut origins = Vec::with_capacity(tracks.len());
+        let mut vectors = Vec::with_capacity(tracks.len());
+        let mut ids = Vec::with_capacity(tracks.len());
+        for &kp in &tracks {
+            let pi = r.kept_tracks[kp];
+            if let Some(obs) = table.get(fi, pi) {
+                let q = r.model.project(kf, kp);
+                origins.push(f2(obs));
+                vectors.push([(q[0] - obs[0]) as f32, (q[1] - obs[1]) as f32]);
+                ids.push(class_id(pi));
+            }
+        }
+        rec.log(
+            paths::RESIDUAL_ARROWS,
+            &Arrows2D::from_vectors(vectors)
+                .with_origins(origins)
+                .with_class_ids(ids),
+        )?;
+        rec.log(paths::FRAME_RMS, &Scalars::single(r.frames[kf].rms_px))?;
+    }
+    rec.disable_timeline(TIMELINE_FRAME);
+    Ok(())
+}
+
+/// The markdown run summary logged on `summary`: inputs, choices, results, timings,
+/// warnings.
+pub fn summary_markdown(r: &Reconstruction) -> String {
+    let i = &r.input;
+    let mut s = String::from("# rank3 reconstruction\n\n## Input\n\n");
+    s.push_str(&format!(
+        "* {} frames × {} tracks, {} observations ({:.1} % filled)\n\
+         * used: {} frames × {} tracks; set aside: {} track(s), {} frame(s)\n",
+        i.frames,
+        i.tracks,
+        i.observations,
+        100.0 * i.fill,
+        i.frames_used,
+        i.tracks_used,
+        r.set_aside
+            .iter()
+            .filter(|a| a.kind == SetAsideKind::Track)
+            .count(),
+        r.set_aside
+            .iter()
+            .filter(|a| a.kind == SetAsideKind::Frame)
+            .count(),
+    ));
+    s.push_str("\n## Choices\n\n");
+    s.push_str(&format!(
+        "* camera model: {}\n* factorization: {} (SVD: {}{})\n* metric upgrade: {:?}\n\
+         * refinement: {}\n* depth-reversal convention mirrored the solution: {}\n",
+        r.camera_model,
+        r.factorization.method,
+        r.factorization.svd_method,
+        r.factorization
+            .svd_fallback_reason
+            .as_deref()
+            .map_or(String::new(), |why| format!(", fallback: {why}")),
+        r.metric_upgrade.method,
+        match &r.refinement {
+            Some(f) => format!(
+                "RMS {:.6} → {:.6} px ({:?}, {} iterations)",
+                f.rms_before_px, f.rms_after_px, f.status, f.iterations
+            ),
+            None => "off".into(),
+        },
+        r.mirrored
+    ));
+    let sv: Vec<String> = r
+        .singular_values
+        .iter()
+        .take(6)
+        .map(|v| format!("{v:.4}"))
+        .collect();
+    s.push_str(&format!(
+        "\n## Results\n\n* singular values: {}\n* σ4/σ3 = {:.4}\n* affine fit RMS: {:.6} px\n\
+         * final RMS: {:.6} px\n",
+        sv.join(", "),
+        r.rank_ratio,
+        r.factorization.rms_px,
+        r.rms_px
+    ));
+    s.push_str("\n## Timings\n\n| stage | seconds |\n|---|---|\n");
+    for t in &r.timings {
+        s.push_str(&format!("| {} | {:.4} |\n", t.stage, t.seconds));
+    }
+    s.push_str("\n## Warnings\n\n");
+    if r.warnings.is_empty() {
+        s.push_str("none\n");
+    }
+    for w in &r.warnings {
+        s.push_str(&format!("* {w}\n"));
+    }
+    s.push('\n');
+    s.push_str(&upgrade_text(r));
+    s
+}
+
+/// Logs a failed run's error on `log/errors` (level ERROR) at stage `result`.
+pub fn log_error(rec: &RecordingStream, error: &Error) -> RecordingResult {
+    at_stage(rec, "result");
+    rec.log(
+        paths::LOG_ERRORS,
+        &TextLog::new(error.to_string()).with_level(TextLogLevel::ERROR),
+    )?;
+    Ok(())
+}
+
+/// Logs the robust (RANSAC) pass at stage `robust`: inlier tracks' trajectories in green on
+/// `image/robust/inliers`, outlier tracks' in red (labelled) on `image/robust/outliers`,
+/// flagged entries as orange points per frame on `image/robust/flagged`, and the inlier count
+/// per RANSAC iteration on `solver/ransac/inliers` (`iteration` timeline).
+///
+/// `inlier_tracks[p]` refers to track `p` of `table`; `flagged_entries` are `(frame, track)`
+/// indices into `table`.
+///
+/// Cost: O(F·N + #flagged + #iterations).
+pub fn log_robust(
+    rec: &RecordingStream,
+    table: &TrackTable,
+    inlier_tracks: &[bool],
+    flagged_entries: &[(usize, usize)],
+    inliers_per_iteration: &[usize],
+) -> RecordingResult {
+    if inlier_tracks.len() != table.n_tracks() {
+        return Err(Error::Dimension {
+            context: "recording::log_robust inlier_tracks",
+            expected: format!("{} entries (one per track)", table.n_tracks()),
+            got: inlier_tracks.len().to_string(),
+        }
+        .into());
+    }
+    if let Some(&(f, p)) = flagged_entries
+        .iter()
+        .find(|&&(f, p)| f >= table.n_frames() || p >= table.n_tracks())
+    {
+        return Err(Error::Dimension {
+            context: "recording::log_robust flagged_entries",
+            expected: format!(
+                "(frame, track) indices below ({}, {})",
+                table.n_frames(),
+                table.n_tracks()
+            ),
+            got: format!("({f}, {p})"),
+        }
+        .into());
+    }
+    at_stage(rec, "robust");
+    let (inl, outl): (Vec<usize>, Vec<usize>) =
+        (0..table.n_tracks()).partition(|&p| inlier_tracks[p]);
+    rec.log(
+        paths::ROBUST_INLIERS,
+        &LineStrips2D::new(inl.iter().map(|&p| trajectory(table, p))).with_colors([GREEN]),
+    )?;
+    rec.log(
+        paths::ROBUST_OUTLIERS,
+        &LineStrips2D::new(outl.iter().map(|&p| trajectory(table, p)))
+            .with_colors([RED])
+            .with_labels(
+                outl.iter()
+                    .map(|&p| format!("outlier track {}", table.track_ids()[p])),
+            ),
+    )?;
+    rec.log(
+        paths::LOG_STAGES,
+        &TextLog::new(format!(
+            "robust: {} inlier track(s), {} outlier track(s), {} flagged entr(y/ies)",
+            inl.len(),
+            outl.len(),
+            flagged_entries.len()
+        ))
+        .with_level(TextLogLevel::INFO),
+    )?;
+    let mut by_frame: Vec<Vec<usize>> = vec![Vec::new(); table.n_frames()];
+    for &(f, p) in flagged_entries {
+        by_frame[f].push(p);
+    }
+    for (f, tracks) in by_frame.iter().enumerate() {
+        if tracks.is_empty() {
+            continue;
+        }
+        rec.set_time_sequence(TIMELINE_FRAME, f as i64);
+        let (pos, ids): (Vec<[f32; 2]>, Vec<u16>) = tracks
+            .iter()
+            .filter_map(|&p| table.get(f, p).map(|xy| (f2(xy), class_id(p))))
+            .unzip();
+        rec.log(
+            paths::ROBUST_FLAGGED,
+            &Points2D::new(pos)
+                .with_class_ids(ids)
+                .with_colors([ORANGE])
+                .with_radii([Radius::new_ui_points(5.0)]),
+        )?;
+    }
+    rec.disable_timeline(TIMELINE_FRAME);
+    for (it, &count) in inliers_per_iteration.iter().enumerate() {
+        rec.set_time_sequence(TIMELINE_ITERATION, it as i64);
+        rec.log(paths::ROBUST_INLIER_COUNT, &Scalars::single(count as f64))?;
+    }
+    rec.disable_timeline(TIMELINE_ITERATION);
+    Ok(())
+}
+
+/// Logs a synthetic scene's ground truth under `truth/`: the true points (outlier tracks
+/// red, the rest grey) on `truth/points` and the true cameras laid out like `world/`
+/// ([`log_cameras`] layout) on `truth/camera…`, at stage `input`. Pair with [`log_input`].
+///
+/// Cost: O(F + N).
+pub fn log_synth_truth(rec: &RecordingStream, scene: &SynthScene) -> RecordingResult {
+    at_stage(rec, "input");
+    let m = &scene.truth;
+    rec.log(
+        paths::TRUTH_POINTS,
+        &Points3D::new(m.points.iter().map(f3))
+            .with_colors((0..m.n_points()).map(|p| {
+                if scene.outlier_tracks.get(p).is_some_and(|o| o.is_some()) {
+                    RED
+                } else {
+                    GREY
+                }
+            }))
+            .with_class_ids((0..m.n_points()).map(class_id)),
+    )?;
+    let frames: Vec<usize> = (0..m.n_frames()).collect();
+    log_cameras(rec, paths::TRUTH_ROOT, m, &frames)?;
+    rec.log(
+        paths::LOG_STAGES,
+        &TextLog::new(format!(
+            "synthetic scene: {} frames × {} tracks, {} outlier track(s), {} gross entr(y/ies)",
+            m.n_frames(),
+            m.n_points(),
+            scene.outlier_tracks.iter().filter(|o| o.is_some()).count(),
+            scene.gross_entries.len()
+        ))
+        .with_level(TextLogLevel::INFO),
+    )?;
+    Ok(())
+}

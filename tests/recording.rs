@@ -1,0 +1,451 @@
+//! Records a small synthetic reconstruction to a temporary .rrd, reads it back with the Rerun
+//! SDK's own decoder (`re_log_encoding`, the codec the viewer uses) and checks that every
+//! entity is there with the expected number of rows and instances, on the expected
+//! timelines, and that logged values match the reconstruction.
+
+#![cfg(feature = "rerun")]
+
+use std::collections::BTreeMap;
+use std::io::BufReader;
+use std::path::Path;
+
+use rank3::recording::{self, RecordingObserver, paths};
+use rank3::synth::{Shape, SynthConfig, generate};
+use rank3::tracks::Id;
+use rank3::{Config, Event, Observer, Reconstruction, TrackTable};
+use re_log_encoding::DecoderApp;
+use rerun::components::Position3D;
+use rerun::external::arrow::array::Array as _;
+use rerun::log::{Chunk, LogMsg};
+
+/// Everything logged to one (entity, component) pair.
+#[derive(Default, Debug)]
+struct Column {
+    /// Instances per logged row.
+    instances: Vec<usize>,
+    /// Timeline name → values, one per row (static rows have none).
+    times: BTreeMap<String, Vec<i64>>,
+    is_static: bool,
+}
+
+impl Column {
+    fn rows(&self) -> usize {
+        self.instances.len()
+    }
+    fn total(&self) -> usize {
+        self.instances.iter().sum()
+    }
+}
+
+struct Contents {
+    columns: BTreeMap<(String, String), Column>,
+    chunks: Vec<Chunk>,
+}
+
+impl Contents {
+    fn get(&self, entity: &str, component: &str) -> &Column {
+        self.columns
+            .get(&(entity.to_string(), component.to_string()))
+            .unwrap_or_else(|| {
+                panic!(
+                    "{entity} / {component} missing; recorded: {:?}",
+                    self.columns.keys().collect::<Vec<_>>()
+                )
+            })
+    }
+
+    /// Positions logged to `entity` (all rows concatenated).
+    fn positions3(&self, entity: &str) -> Vec<[f32; 3]> {
+        let id = rerun::Points3D::descriptor_positions().component;
+        let mut out = Vec::new();
+        for c in self
+            .chunks
+            .iter()
+            .filter(|c| c.entity_path().to_string().trim_start_matches('/') == entity)
+        {
+            for row in c.iter_component::<Position3D>(id) {
+                out.extend(row.iter().map(|p| [p.x(), p.y(), p.z()]));
+            }
+        }
+        out
+    }
+}
+
+fn read_rrd(path: &Path) -> Contents {
+    let file = std::fs::File::open(path).expect("open rrd");
+    let mut columns: BTreeMap<(String, String), Column> = BTreeMap::new();
+    let mut chunks = Vec::new();
+    for msg in DecoderApp::decode_lazy(BufReader::new(file)) {
+        let msg = msg.expect("the .rrd decodes");
+        let LogMsg::ArrowMsg(_, arrow) = msg else {
+            continue;
+        };
+        let chunk = Chunk::from_arrow_msg(&arrow).expect("a valid chunk");
+        let entity = chunk
+            .entity_path()
+            .to_string()
+            .trim_start_matches('/')
+            .to_string();
+        for col in chunk.components().0.values() {
+            let key = (entity.clone(), col.descriptor.component.to_string());
+            let e = columns.entry(key).or_default();
+            e.is_static |= chunk.is_static();
+            let list = &col.list_array;
+            for i in 0..list.len() {
+                e.instances.push(if list.is_null(i) {
+                    0
+                } else {
+                    list.value_length(i) as usize
+                });
+                for (name, tc) in chunk.timelines() {
+                    e.times
+                        .entry(name.to_string())
+                        .or_default()
+                        .push(tc.times_raw()[i]);
+                }
+            }
+        }
+        chunks.push(chunk);
+    }
+    Contents { columns, chunks }
+}
+
+/// A complete synthetic scene plus two stray tracks seen in one frame (set aside).
+fn table() -> (TrackTable, usize) {
+    let scene = generate(&SynthConfig {
+        shape: Shape::Cloud,
+        frames: 9,
+        points: 30,
+        noise: 0.5,
+        seed: 5,
+        ..Default::default()
+    })
+    .unwrap();
+    let t = &scene.table;
+    let mut ids = t.track_ids().to_vec();
+    ids.push(Id::Str("stray-a".into()));
+    ids.push(Id::Str("stray-b".into()));
+    let mut out = TrackTable::new(t.frame_ids().to_vec(), ids);
+    for f in 0..t.n_frames() {
+        for p in 0..t.n_tracks() {
+            if let Some([x, y]) = t.get(f, p) {
+                out.set(f, p, x, y);
+            }
+        }
+    }
+    out.set(3, t.n_tracks(), 10.0, 20.0);
+    out.set(5, t.n_tracks() + 1, 30.0, 40.0);
+    (out, t.n_tracks())
+}
+
+#[test]
+fn recording_round_trips_through_the_rerun_decoder() {
+    let (table, n_used) = table();
+    let (nf, n_all) = (table.n_frames(), table.n_tracks());
+    let dir = std::env::temp_dir().join(format!("rank3-recording-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("run.rrd");
+
+    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
+        .save(&path)
+        .unwrap();
+    recording::log_input(&rec, &table).unwrap();
+    let mut observer = RecordingObserver::new(&rec);
+    let result =
+        Reconstruction::from_tracks_observed(&table, &Config::default(), &mut observer).unwrap();
+    // A solver's iterations (the placeholder refinement emits none): two runs of 3 and 2.
+    for (run, its) in [(0usize, 3usize), (1, 2)] {
+        for iteration in 0..its {
+            observer.on_event(&Event::Iteration {
+                solver: "probe",
+                run,
+                iteration,
+                cost: 10.0 / (1 + iteration) as f64,
+                rms: 1.0,
+                lambda: f64::NAN,
+            });
+        }
+    }
+    assert_eq!(observer.errors().0, 0, "{:?}", observer.first_error());
+    recording::log_reconstruction(&rec, &table, &result).unwrap();
+    let mut inliers = vec![true; n_all];
+    inliers[n_all - 1] = false;
+    inliers[0] = false;
+    recording::log_robust(
+        &rec,
+        &table,
+        &inliers,
+        &[(1, 2), (1, 4), (7, 2)],
+        &[20, 25, 28, 28],
+    )
+    .unwrap();
+    // Mismatched robust data is a typed error, not a panic.
+    assert!(recording::log_robust(&rec, &table, &inliers[1..], &[], &[]).is_err());
+    assert!(recording::log_robust(&rec, &table, &inliers, &[(nf, 0)], &[]).is_err());
+    drop(observer);
+    drop(rec); // flushes and finalizes the file
+
+    assert_eq!(
+        result.kept_tracks.len(),
+        n_used,
+        "the stray tracks are set aside"
+    );
+    assert_eq!(result.kept_frames.len(), nf);
+    let c = read_rrd(&path);
+
+    // Input.
+    let tracks = c.get(paths::TRACKS, "Points2D:positions");
+    assert_eq!(tracks.rows(), nf);
+    assert_eq!(tracks.total(), table.n_observed());
+    assert_eq!(tracks.times["frame"], (0..nf as i64).collect::<Vec<_>>());
+    assert_eq!(
+        c.get(paths::TRACKS, "Points2D:class_ids").total(),
+        table.n_observed()
+    );
+    let traj = c.get(paths::TRAJECTORIES, "LineStrips2D:strips");
+    assert_eq!((traj.rows(), traj.total()), (1, n_all));
+    assert_eq!(traj.times["stage"], vec![0]);
+    let ctx = c.get("image", "AnnotationContext:context");
+    assert!(ctx.is_static);
+    assert_eq!(ctx.rows(), 1, "one context (a map of {n_all} class ids)");
+
+    // Set-aside tracks: separate red entities.
+    assert_eq!(
+        c.get(paths::SET_ASIDE_TRAJECTORIES, "LineStrips2D:strips")
+            .total(),
+        2
+    );
+    let aside = c.get(paths::SET_ASIDE_POINTS, "Points2D:positions");
+    assert_eq!((aside.rows(), aside.total()), (nf, 2));
+    assert_eq!(c.get(paths::LOG_SET_ASIDE, "TextLog:text").rows(), 2);
+
+    // Factorization.
+    assert_eq!(c.get(paths::VISIBILITY, "Image:buffer").rows(), 1);
+    assert_eq!(c.get(paths::W, "Tensor:data").rows(), 1);
+    let sv = c.get(paths::SINGULAR_VALUES, "BarChart:values");
+    assert_eq!(sv.rows(), 1);
+    assert_eq!(sv.times["stage"], vec![3]);
+    let ratio = c.get(paths::RANK_RATIO, "Scalars:scalars");
+    assert_eq!((ratio.rows(), ratio.total()), (1, 1));
+
+    // Structure before and after the metric upgrade.
+    assert_eq!(
+        c.get(paths::AFFINE_POINTS, "Points3D:positions").total(),
+        n_used
+    );
+    let pts = c.get(paths::POINTS, "Points3D:positions");
+    assert_eq!((pts.rows(), pts.total()), (1, n_used));
+    assert_eq!(c.get(paths::POINTS, "Points3D:colors").total(), n_used);
+    assert_eq!(pts.times["stage"], vec![4]);
+    let logged = c.positions3(paths::POINTS);
+    let scale = result
+        .points
+        .iter()
+        .map(|p| p.xyz.iter().fold(0.0f64, |a, v| a.max(v.abs())))
+        .fold(0.0, f64::max);
+    for (got, want) in logged.iter().zip(&result.points) {
+        for k in 0..3 {
+            assert!(
+                (got[k] as f64 - want.xyz[k]).abs() <= 1e-6 * scale,
+                "point {:?} logged as {got:?}",
+                want.xyz
+            );
+        }
+    }
+    assert_eq!(c.get(paths::EIGENVALUES_LS, "BarChart:values").rows(), 1);
+    assert_eq!(c.get(paths::EIGENVALUES, "BarChart:values").rows(), 1);
+    assert_eq!(c.get(paths::METRIC_METHOD, "TextDocument:text").rows(), 1);
+
+    // Cameras: one pose per kept frame, on the frame timeline.
+    let cam = c.get(paths::CAMERA, "Transform3D:mat3x3");
+    assert_eq!(cam.rows(), nf);
+    assert_eq!(
+        cam.times["frame"],
+        result
+            .kept_frames
+            .iter()
+            .map(|&f| f as i64)
+            .collect::<Vec<_>>()
+    );
+    assert_eq!(c.get(paths::CAMERA, "Transform3D:translation").rows(), nf);
+    let axes = c.get(paths::CAMERA_AXES, "Arrows3D:vectors");
+    assert!(axes.is_static);
+    assert_eq!(axes.total(), 3);
+    assert_eq!(
+        c.get(paths::VIEW_DIRECTIONS, "Arrows3D:vectors").total(),
+        nf
+    );
+    assert_eq!(
+        c.get(paths::CAMERA_TRAJECTORY, "LineStrips3D:strips")
+            .total(),
+        1
+    );
+
+    // Residuals.
+    let arrows = c.get(paths::RESIDUAL_ARROWS, "Arrows2D:vectors");
+    assert_eq!((arrows.rows(), arrows.total()), (nf, nf * n_used));
+    assert_eq!(
+        c.get(paths::RESIDUAL_ARROWS, "Arrows2D:origins").total(),
+        nf * n_used
+    );
+    assert_eq!(c.get(paths::POINT_RMS, "BarChart:values").rows(), 1);
+    assert_eq!(c.get(paths::FRAME_RMS, "Scalars:scalars").rows(), nf);
+
+    // Observer: stages, warnings, solver iterations.
+    let stages = c.get(paths::LOG_STAGES, "TextLog:text");
+    assert!(stages.rows() >= 2 * result.timings.len(), "{stages:?}");
+    let warnings = c.get(paths::LOG_WARNINGS, "TextLog:level");
+    assert_eq!(warnings.rows(), result.warnings.len());
+    assert!(!result.warnings.is_empty(), "set-aside tracks warn");
+    let cost0 = c.get("solver/probe/run0/cost", "Scalars:scalars");
+    assert_eq!(cost0.times["iteration"], vec![0, 1, 2]);
+    assert_eq!(c.get("solver/probe/run1/rms", "Scalars:scalars").rows(), 2);
+    assert_eq!(c.get(paths::SUMMARY, "TextDocument:text").rows(), 1);
+
+    // Robust pass.
+    assert_eq!(
+        c.get(paths::ROBUST_INLIERS, "LineStrips2D:strips").total(),
+        n_all - 2
+    );
+    assert_eq!(
+        c.get(paths::ROBUST_OUTLIERS, "LineStrips2D:strips").total(),
+        2
+    );
+    let flagged = c.get(paths::ROBUST_FLAGGED, "Points2D:positions");
+    assert_eq!((flagged.rows(), flagged.total()), (2, 3));
+    assert_eq!(
+        c.get(paths::ROBUST_INLIER_COUNT, "Scalars:scalars").rows(),
+        4
+    );
+
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn summary_names_the_choices() {
+    let (table, _) = table();
+    let result = Reconstruction::from_tracks(&table, &Config::default()).unwrap();
+    let md = recording::summary_markdown(&result);
+    for needle in [
+        "## Input",
+        "## Choices",
+        "## Timings",
+        "## Warnings",
+        "σ4/σ3",
+    ] {
+        assert!(md.contains(needle), "{needle} missing from\n{md}");
+    }
+    assert!(md.contains(&format!("{} frames × {} tracks", 9, 32)));
+    assert!(md.contains("set aside"));
+}
+
+#[test]
+fn cli_rrd_flag_records_synth_and_reconstruct() {
+    let dir = std::env::temp_dir().join(format!("rank3-recording-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let run = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let d = dir.to_str().unwrap();
+    run(&[
+        "synth",
+        "--out",
+        &format!("{d}/scene"),
+        "--frames",
+        "8",
+        "--points",
+        "25",
+        "--rrd",
+        &format!("{d}/rrd/synth.rrd"), // the directory is created
+    ]);
+    run(&[
+        "reconstruct",
+        &format!("{d}/scene/tracks.csv"),
+        "--out",
+        &format!("{d}/out"),
+        "--rrd",
+        &format!("{d}/run.rrd"),
+    ]);
+    let synth = read_rrd(&dir.join("rrd/synth.rrd"));
+    assert_eq!(synth.get(paths::TRACKS, "Points2D:positions").rows(), 8);
+    assert_eq!(
+        synth.get(paths::TRUTH_POINTS, "Points3D:positions").total(),
+        25
+    );
+    assert_eq!(synth.get("truth/camera", "Transform3D:mat3x3").rows(), 8);
+    let run = read_rrd(&dir.join("run.rrd"));
+    assert_eq!(run.get(paths::POINTS, "Points3D:positions").total(), 25);
+    assert_eq!(run.get(paths::CAMERA, "Transform3D:mat3x3").rows(), 8);
+    assert_eq!(run.get(paths::SUMMARY, "TextDocument:text").rows(), 1);
+    // A bad destination is a clean error, not a panic.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
+        .args([
+            "reconstruct",
+            &format!("{d}/scene/tracks.csv"),
+            "--out",
+            &format!("{d}/out2"),
+            "--rrd",
+            &format!("{d}/scene/tracks.csv/x.rrd"),
+        ])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).starts_with("error: "));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The viewer's own loader (`rerun rrd verify`, Rerun CLI 0.36.3) accepts the file. Skipped
+/// with a message when no `rerun` 0.36.3 is on PATH (or in `$RERUN_BIN`); install it with
+/// `pip install rerun-sdk==0.36.3` or `cargo install rerun-cli --version 0.36.3 --locked`.
+#[test]
+fn rerun_viewer_verifies_the_recording() {
+    let bin = std::env::var("RERUN_BIN").unwrap_or_else(|_| "rerun".into());
+    let version = std::process::Command::new(&bin)
+        .arg("--version")
+        .env("RERUN_ANALYTICS", "0")
+        .output();
+    let version = match version {
+        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
+        _ => {
+            eprintln!("SKIPPED: no `rerun` CLI on PATH (pip install rerun-sdk==0.36.3)");
+            return;
+        }
+    };
+    if !version.contains(" 0.36.3 ") {
+        eprintln!("SKIPPED: `rerun` is not 0.36.3 ({})", version.trim());
+        return;
+    }
+    let (table, _) = table();
+    let dir = std::env::temp_dir().join(format!("rank3-recording-verify-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("run.rrd");
+    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
+        .save(&path)
+        .unwrap();
+    let result = recording::reconstruct_recorded(Some(&rec), &table, &Config::default()).unwrap();
+    let n = table.n_tracks();
+    recording::log_robust(&rec, &table, &vec![true; n], &[(0, 0)], &[n]).unwrap();
+    drop(rec);
+    assert_eq!(result.kept_frames.len(), table.n_frames());
+    let out = std::process::Command::new(&bin)
+        .args(["rrd", "verify"])
+        .arg(&path)
+        .env("RERUN_ANALYTICS", "0")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "rerun rrd verify failed:\n{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
