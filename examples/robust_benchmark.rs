@@ -273,6 +273,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let _ = Reconstruction::from_tracks(
         &clean.table,
         &Config {
+            robust: None,
             refine: None,
             ..Config::default()
         },

@@ -24,8 +24,8 @@
 //!    inlier when its unflagged RMS `r` over `k` frames passes the χ² test
 //!    `r ≤ σ_e sqrt(χ²_ν(track_probability)/ν)`, `ν = 2k − 3` (or `r ≤ threshold_px` when
 //!    given), and at most `max_flagged_fraction` of its entries are flagged. The model is
-//!    refitted without the flagged entries and this is repeated until nothing changes (at
-//!    most `max_gross_rounds`).
+//!    refitted without the flagged entries and this is repeated until the inliers do not
+//!    change and at most 0.1 % of the flags do (none when there are fewer than 1000) (at most `max_gross_rounds`).
 //! 4. **Verdict**: a rigid majority exists when the inlier fraction is at least
 //!    `min_inlier_fraction` and no *rival* rigid group (a second RANSAC over the rejected
 //!    tracks, same threshold) has at least `max_rival_ratio` times as many tracks. Otherwise
@@ -38,8 +38,10 @@
 //! J. Kittler, "Locally optimized RANSAC", DAGM 2003; P. J. Rousseeuw, "Least median of
 //! squares regression", JASA 79, 1984; C. Tomasi and T. Kanade, IJCV 9(2), 1992.
 //!
-//! Complexity: O(I · #observations) for I RANSAC hypotheses (I adaptive, ≤
-//! `max_iterations`; with missing data add O(I · N · F/64) for sampling), plus a few
+//! Complexity: O(I · j̄ · k) for I RANSAC hypotheses (I adaptive, ≤ `max_iterations`)
+//! each scored on `j̄` tracks of `k` frames before the bail-out test abandons it (`j̄` ≈
+//! 32–64 for hopeless hypotheses, the scale bootstrap on at most `scale_subset` tracks; see
+//! [`ransac`]); with missing data add O(I · N · F/64) for sampling; plus a few
 //! affine refits (O(F·N·3) SVD for complete data, O(#observations) per ALS sweep), plus
 //! the rival search (same order, on the rejected tracks only, and only when they are
 //! numerous enough to matter).
@@ -51,6 +53,7 @@ pub mod ransac;
 pub mod subspace;
 
 use rand::Rng;
+use rayon::prelude::*;
 use serde::Serialize;
 
 pub use ransac::{Estimator, RansacConfig, RansacResult, RansacStatus, ransac, ransac_observed};
@@ -423,10 +426,25 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                     }
                 }
             }
-            (!d.is_empty()).then(|| (crate::eval::median(&d) / 1.177_410_022_515_474_8).max(floor))
+            (!d.is_empty()).then(|| (median_in_place(&mut d) / 1.177_410_022_515_474_8).max(floor))
+        };
+        // Only the inlier tracks' fits enter the scale.
+        let is_inl = {
+            let mut v = vec![false; n];
+            for &p in &inl {
+                v[p] = true;
+            }
+            v
         };
         let trimmed: Vec<Option<[f64; 3]>> = (0..n)
-            .map(|p| cur.track_fit(&model, p).map(|f| f.s))
+            .into_par_iter()
+            .map(|p| {
+                if is_inl[p] {
+                    cur.track_fit(&model, p).map(|f| f.s)
+                } else {
+                    None
+                }
+            })
             .collect();
         if let Some(sg) = scale_of(&trimmed) {
             sigma_e = sg;
@@ -435,8 +453,13 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             .entry_threshold_px
             .unwrap_or((entry_k * sigma_e).max(config.min_entry_threshold_px));
         let fits0: Vec<Option<[f64; 3]>> = (0..n)
+            .into_par_iter()
             .map(|p| {
-                entry_fit(&est, &cur, &model, p, thr0, config.max_flagged_fraction).map(|f| f.s)
+                if is_inl[p] {
+                    entry_fit(&est, &cur, &model, p, thr0, config.max_flagged_fraction).map(|f| f.s)
+                } else {
+                    None
+                }
             })
             .collect();
         if let Some(sg) = scale_of(&fits0) {
@@ -446,6 +469,7 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             .entry_threshold_px
             .unwrap_or((entry_k * sigma_e).max(config.min_entry_threshold_px));
         let fits: Vec<Option<EntryFit>> = (0..n)
+            .into_par_iter()
             .map(|p| {
                 entry_fit(
                     &est,
@@ -455,6 +479,13 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                     entry_thr,
                     config.max_flagged_fraction,
                 )
+            })
+            .collect();
+        // χ²_ν(track_probability)/ν for ν = 2k − 3, k = 0..=F (computed once per round).
+        let chi2_ratio: Vec<f64> = (0..=nf)
+            .map(|k| {
+                let nu = (2 * k) as f64 - 3.0;
+                chi2_quantile(nu, config.track_probability) / nu
             })
             .collect();
         let mut new_flags = Vec::new();
@@ -476,11 +507,8 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             };
             let limit = match config.ransac.threshold_px {
                 Some(t) => t,
-                None => {
-                    let nu = (2 * fit.kept) as f64 - 3.0;
-                    (sigma_e * (chi2_quantile(nu, config.track_probability) / nu).sqrt())
-                        .max(config.min_track_threshold_px)
-                }
+                None => (sigma_e * chi2_ratio[fit.kept.min(nf)].sqrt())
+                    .max(config.min_track_threshold_px),
             };
             if fit.rms > limit
                 || fit.flagged.len() as f64 > config.max_flagged_fraction * fit.seen as f64
@@ -491,7 +519,11 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             new_flags.extend(fit.flagged.iter().map(|&f| (f, p)));
         }
         new_flags.sort_unstable();
-        let changed = new_flags != flagged || new_inl != inl;
+        // Converged when the inliers are unchanged and at most 0.1 % of the flags (rounded
+        // down) changed: refitting without a handful of borderline entries among thousands
+        // moves the model by far less than the noise.
+        let flag_changes = symmetric_difference(&new_flags, &flagged);
+        let changed = new_inl != inl || flag_changes > flagged.len() / 1000;
         flagged = new_flags;
         inl = new_inl;
         if !changed || rounds >= config.max_gross_rounds || inl.len() < 4 {
@@ -699,10 +731,17 @@ fn entry_fit(
             let Some(s) = est.ls_coords(model, p, &pair) else {
                 continue;
             };
-            let count = frames
-                .iter()
-                .filter(|&&f| est.dist2(model, p, f as usize, &s) <= thr2)
-                .count();
+            // Count the consistent entries; stop once this pair cannot beat the best.
+            let need = best.map_or(0, |b| b.0);
+            let mut count = 0usize;
+            for (j, &f) in frames.iter().enumerate() {
+                if est.dist2(model, p, f as usize, &s) <= thr2 {
+                    count += 1;
+                }
+                if count + (k - j - 1) <= need {
+                    break;
+                }
+            }
             if best.is_none_or(|b| count > b.0) {
                 best = Some((count, s));
             }
@@ -712,6 +751,46 @@ fn entry_fit(
     match (first, second) {
         (Some(a), Some(b)) => Some(if b.kept > a.kept { b } else { a }),
         (a, b) => a.or(b),
+    }
+}
+
+/// Size of the symmetric difference of two sorted lists.
+fn symmetric_difference(a: &[(usize, usize)], b: &[(usize, usize)]) -> usize {
+    let (mut i, mut j, mut d) = (0, 0, 0);
+    while i < a.len() && j < b.len() {
+        match a[i].cmp(&b[j]) {
+            std::cmp::Ordering::Less => {
+                d += 1;
+                i += 1;
+            }
+            std::cmp::Ordering::Greater => {
+                d += 1;
+                j += 1;
+            }
+            std::cmp::Ordering::Equal => {
+                i += 1;
+                j += 1;
+            }
+        }
+    }
+    d + (a.len() - i) + (b.len() - j)
+}
+
+/// Median (mean of the two middle values for an even count, as [`crate::eval::median`])
+/// by selection, O(len); reorders `v`. NaN for an empty slice.
+fn median_in_place(v: &mut [f64]) -> f64 {
+    let len = v.len();
+    if len == 0 {
+        return f64::NAN;
+    }
+    let mid = len / 2;
+    let (lo, m, _) = v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+    let m = *m;
+    if len % 2 == 1 {
+        m
+    } else {
+        let below = lo.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        0.5 * (below + m)
     }
 }
 

@@ -34,10 +34,24 @@
 //! Since the number of so-far-the-best hypotheses grows only logarithmically with the
 //! number of draws, LO adds little to the total cost.
 //!
+//! # Bail-out test
+//!
+//! Most hypotheses are hopeless, and scoring each on all `n` items dominates the cost. The
+//! items are put in one random order per run; each hypothesis is scored in that order and
+//! abandoned early: exactly when its partial cost already reaches the best cost (and its
+//! scored-inlier ratio cannot beat the best's), and statistically (Capel, "An effective
+//! bail-out test for RANSAC consensus scoring", BMVC 2005; in the spirit of the T(d,d)
+//! pre-test of Matas & Chum, "Randomized RANSAC with T(d,d) test", BMVC 2002) when, after
+//! 32, 64, 128, … items, Wilson intervals at `bail_out_z` standard errors say that its mean
+//! per-item cost is above the best's and its scored-inlier ratio below the best's. A
+//! hopeless hypothesis thus costs O(32) residuals instead of O(n); a better one is kept
+//! with probability ≥ 1 − log₂(n/32)·Φ(−z) (0.99 at the default z = 3.09).
+//!
 //! # Unknown threshold
 //!
-//! With `threshold_px = None` the noise scale `σ` is estimated first: hypotheses are ranked
-//! by the `scale_quantile`-quantile of their residuals (least quantile of squares,
+//! With `threshold_px = None` the noise scale `σ` is estimated first, on `scale_subset`
+//! items drawn at random (all when fewer): hypotheses are ranked by the
+//! `scale_quantile`-quantile of their residuals (least quantile of squares,
 //! Rousseeuw 1984, tolerant of up to `1 − scale_quantile` outliers); from the best one,
 //! `σ = Estimator::sigma_from_residuals(residuals below that quantile)`, then iterated
 //! `σ ← sigma_from_residuals({r_i ≤ κσ})` with a refit on those inliers between steps, where
@@ -48,8 +62,11 @@
 //!
 //! # Complexity
 //!
-//! `O(iterations · (fit + n · residual))` plus `O(#improvements · lo_iterations ·
-//! (refit + n · residual))`.
+//! `O(iterations · (fit + j̄ · residual))` with `j̄ ≤ n` the mean number of items scored
+//! before bail-out (≈ 32–64 for hopeless hypotheses; `n` without bail-out), the scale
+//! bootstrap's the same with `min(n, scale_subset)` in place of `n`, plus
+//! `O(#improvements · lo_iterations · (refit + n · residual))` (the full scoring through
+//! [`Estimator::residuals`], which an estimator may parallelize).
 
 use rand::{Rng, RngExt};
 
@@ -70,6 +87,12 @@ pub trait Estimator {
     /// Residual of item `item` under `model` (non-negative, in the threshold's units);
     /// `None` when the item cannot be scored against this model (e.g. too little overlap).
     fn residual(&self, model: &Self::Model, item: usize) -> Option<f64>;
+
+    /// Residuals of all items `0..n` (`residual` of each, in order). Override to compute
+    /// them in parallel; the result must not depend on the thread count.
+    fn residuals(&self, model: &Self::Model, n: usize) -> Vec<Option<f64>> {
+        (0..n).map(|i| self.residual(model, i)).collect()
+    }
 
     /// Local optimization: a (non-minimal) fit to the given inliers, starting from `model`.
     /// `None` when the inliers do not determine a model.
@@ -139,6 +162,18 @@ pub struct RansacConfig {
     /// an all-inlier sample when at least this fraction of the items are inliers
     /// (`N = log(1 − p)/log(1 − wˢ)`, 267 for w = 0.4, s = 4). Default 0.4.
     pub scale_min_inlier_ratio: f64,
+    /// The scale bootstrap (least-quantile ranking and `σ` fixed point) scores this many
+    /// items drawn at random (all of them when there are fewer). Default 400: the
+    /// `scale_quantile` of 400 residuals ranks hypotheses as well as that of all items, and
+    /// the median of ~300 inlier residuals gives `σ` to a few per cent, which the final
+    /// re-estimation from all inliers then refines.
+    pub scale_subset: usize,
+    /// Bail-out test (see the module documentation): score each hypothesis on the items
+    /// in a random order and abandon it as soon as a one-sided test at `bail_out_z`
+    /// standard errors says it can beat neither the best cost nor the best scored-inlier
+    /// ratio. `None` scores every hypothesis fully (up to the exact bound). Default
+    /// `Some(3.09)` (one-sided 0.001 per test).
+    pub bail_out_z: Option<f64>,
 }
 
 impl Default for RansacConfig {
@@ -155,6 +190,8 @@ impl Default for RansacConfig {
             scale_quantile: 0.25,
             sigma_iterations: 5,
             scale_min_inlier_ratio: 0.4,
+            scale_subset: 400,
+            bail_out_z: Some(3.09),
         }
     }
 }
@@ -204,6 +241,17 @@ impl RansacConfig {
                 "ransac.scale_min_inlier_ratio",
                 format!("{} is not in (0, 1]", self.scale_min_inlier_ratio),
             );
+        }
+        if self.scale_subset < 16 {
+            return bad(
+                "ransac.scale_subset",
+                format!("{} < 16 items cannot rank hypotheses", self.scale_subset),
+            );
+        }
+        if let Some(z) = self.bail_out_z
+            && !(z > 0.0 && z.is_finite())
+        {
+            return bad("ransac.bail_out_z", format!("{z} is not positive"));
         }
         Ok(())
     }
@@ -267,7 +315,7 @@ impl<M> Scored<M> {
 }
 
 fn score<E: Estimator>(est: &E, model: E::Model, n: usize, tau: f64) -> Scored<E::Model> {
-    let residuals: Vec<Option<f64>> = (0..n).map(|i| est.residual(&model, i)).collect();
+    let residuals = est.residuals(&model, n);
     let t2 = tau * tau;
     let mut cost = 0.0;
     let mut n_in = 0;
@@ -290,25 +338,53 @@ fn score<E: Estimator>(est: &E, model: E::Model, n: usize, tau: f64) -> Scored<E
     }
 }
 
-/// [`score`] that gives up (returns `None`) as soon as the hypothesis can neither beat
-/// the cost `bound` nor the scored-inlier ratio `ratio_bound`: the partial cost is a lower
-/// bound of the cost (non-negative terms), and with `o` scored outliers among `n` items
-/// the ratio is at most `1 − o/n`. Exact.
+/// Wilson score interval `[lo, hi]` at `z` standard errors for a proportion `p̂` estimated
+/// from `j` trials; used with `p̂` the mean of a variable in `[0, 1]` (whose variance is
+/// at most `p̂(1 − p̂)`, the Bernoulli case).
+fn wilson(p: f64, j: f64, z: f64) -> (f64, f64) {
+    let z2 = z * z;
+    let centre = p + z2 / (2.0 * j);
+    let half = z * (p * (1.0 - p) / j + z2 / (4.0 * j * j)).max(0.0).sqrt();
+    let d = 1.0 + z2 / j;
+    ((centre - half) / d, (centre + half) / d)
+}
+
+/// First item count at which the bail-out tests are applied; later at doubling counts.
+const BAIL_OUT_FIRST: usize = 32;
+
+/// MSAC scoring of `model` over the items in `order` (a permutation of `0..n`) that gives
+/// up (returns `None`) as soon as the hypothesis can neither beat the cost `bound` nor the
+/// scored-inlier ratio `ratio_bound`.
+///
+/// * Exact bound: the partial cost is a lower bound of the cost (non-negative terms), and
+///   with `o` scored outliers among `n` items the ratio is at most `1 − o/n`.
+/// * Bail-out (Capel, BMVC 2005), with `z = Some(z)`: after `j = 32, 64, 128, …` items of
+///   the random order, the mean per-item cost `c̄` (in units of `τ²`, a variable in
+///   `[0, 1]`) and the scored-inlier ratio have Wilson intervals at `z` standard errors; the
+///   hypothesis is abandoned when the lower end of the cost interval exceeds the best's
+///   mean cost `bound / (n τ²)` *and* the upper end of the ratio interval is below
+///   `ratio_bound`. Each test wrongly abandons a better hypothesis with probability about
+///   `Φ(−z)`, so a good hypothesis survives all `log₂(n/32)` tests with probability
+///   `≥ 1 − log₂(n/32) Φ(−z)` (0.99 for z = 3.09, n = 2000); cost O(j) instead of O(n)
+///   for the typical hopeless hypothesis.
 fn score_bounded<E: Estimator>(
     est: &E,
     model: E::Model,
-    n: usize,
+    order: &[usize],
     tau: f64,
     bound: f64,
     ratio_bound: f64,
+    z: Option<f64>,
 ) -> Option<Scored<E::Model>> {
+    let n = order.len();
     let t2 = tau * tau;
-    let mut residuals = Vec::with_capacity(n);
+    let mut residuals = vec![None; n];
     let mut cost = 0.0;
     let mut n_in = 0;
     let mut n_scored = 0;
     let mut scored_out = 0usize;
-    for i in 0..n {
+    let mut check = BAIL_OUT_FIRST;
+    for (j, &i) in order.iter().enumerate() {
         let r = est.residual(&model, i);
         if r.is_some() {
             n_scored += 1;
@@ -327,7 +403,25 @@ fn score_bounded<E: Estimator>(
         if cost >= bound && 1.0 - scored_out as f64 / n as f64 <= ratio_bound {
             return None;
         }
-        residuals.push(r);
+        residuals[i] = r;
+        if j + 1 == check && j + 1 < n {
+            check *= 2;
+            if let Some(z) = z
+                && bound.is_finite()
+                && t2 > 0.0
+            {
+                let jf = (j + 1) as f64;
+                let (cost_lo, _) = wilson((cost / (jf * t2)).min(1.0), jf, z);
+                let hopeless_cost = cost_lo > bound / (n as f64 * t2);
+                let hopeless_ratio = n_scored > 0 && {
+                    let (_, hi) = wilson(n_in as f64 / n_scored as f64, n_scored as f64, z);
+                    hi < ratio_bound
+                };
+                if hopeless_cost && hopeless_ratio {
+                    return None;
+                }
+            }
+        }
     }
     Some(Scored {
         model,
@@ -338,26 +432,44 @@ fn score_bounded<E: Estimator>(
     })
 }
 
-/// Residuals for the least-quantile bootstrap, or `None` as soon as more than `n − k`
-/// items have a residual ≥ `bound` (then the `k`-th smallest cannot be below `bound`).
+/// Residuals of the items `items` (in that order, which is random) for the least-quantile
+/// bootstrap, or `None` once the `k`-th smallest cannot be below `bound`: exactly, when more
+/// than `len − k` items have a residual ≥ `bound`; and, with `z = Some(z)`, when after
+/// `j = 32, 64, …` items the Wilson upper bound of the fraction below `bound` is below
+/// `k / len` (see [`score_bounded`]).
 fn residuals_bounded<E: Estimator>(
     est: &E,
     model: &E::Model,
-    n: usize,
+    items: &[usize],
     k: usize,
     bound: f64,
+    z: Option<f64>,
 ) -> Option<Vec<Option<f64>>> {
-    let mut out = Vec::with_capacity(n);
+    let m = items.len();
+    let mut out = Vec::with_capacity(m);
     let mut above = 0;
-    for i in 0..n {
+    let mut check = BAIL_OUT_FIRST;
+    for (j, &i) in items.iter().enumerate() {
         let r = est.residual(model, i);
         if r.is_none_or(|r| !(r < bound)) {
             above += 1;
-            if above > n - k {
+            if above > m - k {
                 return None;
             }
         }
         out.push(r);
+        if j + 1 == check && j + 1 < m {
+            check *= 2;
+            if let Some(z) = z
+                && bound.is_finite()
+            {
+                let jf = (j + 1) as f64;
+                let (_, hi) = wilson((jf - above as f64) / jf, jf, z);
+                if hi < k as f64 / m as f64 {
+                    return None;
+                }
+            }
+        }
     }
     Some(out)
 }
@@ -513,6 +625,13 @@ pub fn ransac_observed<E: Estimator, R: Rng + ?Sized>(
         status: RansacStatus::NoModel,
     };
 
+    // A random order of the items: the scale bootstrap's subset is its head, and the MSAC
+    // hypotheses are scored in this order (bail-out test).
+    let mut order: Vec<usize> = (0..n).collect();
+    for i in (1..n).rev() {
+        order.swap(i, rng.random_range(0..=i));
+    }
+
     // Phase 1 (unknown threshold): least-quantile hypotheses, then σ by fixed point.
     let kappa = est.threshold_multiple(config.inlier_probability);
     let mut scale_iterations = 0;
@@ -527,13 +646,17 @@ pub fn ransac_observed<E: Estimator, R: Rng + ?Sized>(
                 config.min_iterations,
                 config.max_iterations,
             );
+            // Scale bootstrap on a random subset of the items (in random order).
+            let sub: Vec<usize> = order[..config.scale_subset.min(n)].to_vec();
+            let m_sub = sub.len();
+            let k = ((config.scale_quantile * m_sub as f64).ceil() as usize).clamp(1, m_sub);
             let mut best: Option<(f64, E::Model, Vec<Option<f64>>)> = None;
             for it in 0..budget {
                 scale_iterations = it + 1;
                 if let Some(m) = draw(est, n, config.max_sample_attempts, rng, &mut buf) {
-                    let k = ((config.scale_quantile * n as f64).ceil() as usize).clamp(1, n);
                     let bound = best.as_ref().map_or(f64::INFINITY, |b| b.0);
-                    if let Some(res) = residuals_bounded(est, &m, n, k, bound) {
+                    if let Some(res) = residuals_bounded(est, &m, &sub, k, bound, config.bail_out_z)
+                    {
                         let q = quantile_residual(&res, config.scale_quantile);
                         if q < bound {
                             best = Some((q, m, res));
@@ -558,12 +681,15 @@ pub fn ransac_observed<E: Estimator, R: Rng + ?Sized>(
                     break;
                 }
                 let t = kappa * sg;
-                let inl = inlier_indices(&res, t);
+                let inl: Vec<usize> = inlier_indices(&res, t)
+                    .into_iter()
+                    .map(|j| sub[j])
+                    .collect();
                 if inl.len() >= s
                     && let Some(m) = est.refit(&model, &inl)
                 {
                     model = m;
-                    res = (0..n).map(|i| est.residual(&model, i)).collect();
+                    res = sub.iter().map(|&i| est.residual(&model, i)).collect();
                 }
                 let new = est.sigma_from_residuals(&residuals_below(&res, t));
                 let done = (new - sg).abs() <= 1e-3 * sg;
@@ -597,10 +723,13 @@ pub fn ransac_observed<E: Estimator, R: Rng + ?Sized>(
         if let Some(m) = draw(est, n, config.max_sample_attempts, rng, &mut buf) {
             let bound = best.as_ref().map_or(f64::INFINITY, |b| b.cost);
             let ratio_bound = best.as_ref().map_or(0.0, |b| b.scored_ratio());
-            let cand = score_bounded(est, m, n, tau, bound, ratio_bound).filter(|c| {
-                c.cost < bound
-                    || (config.local_optimization && c.n_in >= s && c.scored_ratio() > ratio_bound)
-            });
+            let cand = score_bounded(est, m, &order, tau, bound, ratio_bound, config.bail_out_z)
+                .filter(|c| {
+                    c.cost < bound
+                        || (config.local_optimization
+                            && c.n_in >= s
+                            && c.scored_ratio() > ratio_bound)
+                });
             if let Some(cand) = cand {
                 let cand = if config.local_optimization {
                     local_optimize(

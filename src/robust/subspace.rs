@@ -51,6 +51,7 @@
 use faer::Mat;
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 use rand::{Rng, RngExt};
+use rayon::prelude::*;
 
 use super::ransac::Estimator;
 use crate::Measurements;
@@ -105,6 +106,7 @@ impl AffineSubspace {
     }
 
     /// Predicted image point of affine coordinates `s` in frame `f`.
+    #[inline]
     pub fn predict(&self, f: usize, s: &[f64; 3]) -> [f64; 2] {
         let row = |r: usize| {
             self.t[r] + self.m[3 * r] * s[0] + self.m[3 * r + 1] * s[1] + self.m[3 * r + 2] * s[2]
@@ -152,6 +154,11 @@ pub struct TrackSubspace {
     nu_typical: f64,
 }
 
+/// ALS stops when a sweep changes the cost `Σ kept d²` by less than this, relatively.
+/// 1e-6 moves the fit by far less than the noise (the cost's relative standard error is
+/// `~1/sqrt(#entries)`), and stops the slow linear tail of ALS early.
+const ALS_TOLERANCE: f64 = 1e-6;
+
 /// `sqrt(2 ln 2)`: the median of the distance of a 2D standard Gaussian.
 const RAYLEIGH_MEDIAN: f64 = 1.177_410_022_515_474_8;
 
@@ -171,6 +178,57 @@ fn solve3(g: &Matrix3<f64>, b: &Vector3<f64>) -> Option<Vector3<f64>> {
         return None;
     }
     Some(c.solve(b))
+}
+
+/// Per-thread scratch of [`TrackSubspace::track_fit`]: the usable frames of the track, its
+/// observations minus the model offset, and (distance², local index) pairs for trimming.
+#[derive(Default)]
+struct Scratch {
+    fr: Vec<u32>,
+    y: Vec<[f64; 2]>,
+    d2: Vec<(f64, u32)>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
+}
+
+/// `‖M_f s − y‖²` for frame `fr` of a row-major 2F×3 motion `m`.
+#[inline]
+fn frame_dist2(m: &[f64], fr: u32, y: &[f64; 2], s: &[f64; 3]) -> f64 {
+    let r = &m[6 * fr as usize..6 * fr as usize + 6];
+    let ex = r[0] * s[0] + r[1] * s[1] + r[2] * s[2] - y[0];
+    let ey = r[3] * s[0] + r[4] * s[1] + r[5] * s[2] - y[1];
+    ex * ex + ey * ey
+}
+
+/// Least-squares `s = argmin Σ_i ‖M_{fr_i} s − y_i‖²` over the local indices `idx`
+/// (normal equations, [`solve3`]).
+#[inline]
+fn normal_solve(
+    m: &[f64],
+    fr: &[u32],
+    y: &[[f64; 2]],
+    idx: impl Iterator<Item = usize>,
+) -> Option<[f64; 3]> {
+    let (mut g00, mut g01, mut g02, mut g11, mut g12, mut g22) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let (mut b0, mut b1, mut b2) = (0.0, 0.0, 0.0);
+    for i in idx {
+        let f = fr[i] as usize;
+        let r = &m[6 * f..6 * f + 6];
+        let [yx, yy] = y[i];
+        g00 += r[0] * r[0] + r[3] * r[3];
+        g01 += r[0] * r[1] + r[3] * r[4];
+        g02 += r[0] * r[2] + r[3] * r[5];
+        g11 += r[1] * r[1] + r[4] * r[4];
+        g12 += r[1] * r[2] + r[4] * r[5];
+        g22 += r[2] * r[2] + r[5] * r[5];
+        b0 += r[0] * yx + r[3] * yy;
+        b1 += r[1] * yx + r[4] * yy;
+        b2 += r[2] * yx + r[5] * yy;
+    }
+    let g = Matrix3::new(g00, g01, g02, g01, g11, g12, g02, g12, g22);
+    solve3(&g, &Vector3::new(b0, b1, b2)).map(|s| [s[0], s[1], s[2]])
 }
 
 impl TrackSubspace {
@@ -281,19 +339,32 @@ impl TrackSubspace {
     /// Least-squares coordinates of track `p` from `frames` (which must be defined);
     /// `None` when they are not determined.
     pub fn ls_coords(&self, model: &AffineSubspace, p: usize, frames: &[u32]) -> Option<[f64; 3]> {
-        let mut g = Matrix3::zeros();
-        let mut b = Vector3::zeros();
+        let rows = 2 * self.f;
+        let w = &self.obs[p * rows..(p + 1) * rows];
+        let m = &model.m;
+        let (mut g00, mut g01, mut g02, mut g11, mut g12, mut g22) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let (mut b0, mut b1, mut b2) = (0.0, 0.0, 0.0);
         for &fr in frames {
-            for r in [2 * fr as usize, 2 * fr as usize + 1] {
-                let a = Vector3::new(model.m[3 * r], model.m[3 * r + 1], model.m[3 * r + 2]);
-                g += a * a.transpose();
-                b += a * (self.w(p, r) - model.t[r]);
-            }
+            let f = fr as usize;
+            let r = &m[6 * f..6 * f + 6];
+            let yx = w[2 * f] - model.t[2 * f];
+            let yy = w[2 * f + 1] - model.t[2 * f + 1];
+            g00 += r[0] * r[0] + r[3] * r[3];
+            g01 += r[0] * r[1] + r[3] * r[4];
+            g02 += r[0] * r[2] + r[3] * r[5];
+            g11 += r[1] * r[1] + r[4] * r[4];
+            g12 += r[1] * r[2] + r[4] * r[5];
+            g22 += r[2] * r[2] + r[5] * r[5];
+            b0 += r[0] * yx + r[3] * yy;
+            b1 += r[1] * yx + r[4] * yy;
+            b2 += r[2] * yx + r[5] * yy;
         }
-        solve3(&g, &b).map(|s| [s[0], s[1], s[2]])
+        let g = Matrix3::new(g00, g01, g02, g01, g11, g12, g02, g12, g22);
+        solve3(&g, &Vector3::new(b0, b1, b2)).map(|s| [s[0], s[1], s[2]])
     }
 
     /// Squared image distance of track `p`'s observation in frame `fr` to `M_f s + t_f`.
+    #[inline]
     pub fn dist2(&self, model: &AffineSubspace, p: usize, fr: usize, s: &[f64; 3]) -> f64 {
         let q = model.predict(fr, s);
         let dx = q[0] - self.w(p, 2 * fr);
@@ -303,43 +374,56 @@ impl TrackSubspace {
 
     /// Trimmed robust fit of track `p` (see the module documentation); `None` when the
     /// track shares fewer than `min_overlap` usable frames with the model or its
-    /// coordinates are not determined.
+    /// coordinates are not determined. Allocation-free after a thread's first call (a
+    /// thread-local scratch holds the track's centred observations); O(k) with k the
+    /// overlap (three 3×3 solves, two linear-time selections).
     pub fn track_fit(&self, model: &AffineSubspace, p: usize) -> Option<TrackFit> {
-        let frames: Vec<u32> = self.frames_of[p]
-            .iter()
-            .copied()
-            .filter(|&fr| model.defined[fr as usize])
-            .collect();
-        let k = frames.len();
+        SCRATCH.with_borrow_mut(|sc| self.track_fit_in(model, p, sc))
+    }
+
+    fn track_fit_in(&self, model: &AffineSubspace, p: usize, sc: &mut Scratch) -> Option<TrackFit> {
+        let rows = 2 * self.f;
+        let w = &self.obs[p * rows..(p + 1) * rows];
+        sc.fr.clear();
+        sc.y.clear();
+        for &fr in &self.frames_of[p] {
+            let f = fr as usize;
+            if model.defined[f] {
+                sc.fr.push(fr);
+                sc.y.push([w[2 * f] - model.t[2 * f], w[2 * f + 1] - model.t[2 * f + 1]]);
+            }
+        }
+        let k = sc.fr.len();
         if k < self.min_overlap {
             return None;
         }
-        let mut s = self.ls_coords(model, p, &frames)?;
+        let (fr, y) = (&sc.fr, &sc.y);
+        let mut s = normal_solve(&model.m, fr, y, 0..k)?;
         let trim = ((self.cfg.trim_fraction * k as f64).floor() as usize).min(k - 2);
-        let mut kept = frames.clone();
-        let mut d2: Vec<(f64, u32)> = Vec::with_capacity(k);
+        let kk = k - trim;
         if trim > 0 {
             for _ in 0..2 {
-                d2.clear();
-                d2.extend(
-                    frames
-                        .iter()
-                        .map(|&fr| (self.dist2(model, p, fr as usize, &s), fr)),
-                );
-                d2.select_nth_unstable_by(k - trim - 1, |a, b| a.0.total_cmp(&b.0));
-                kept.clear();
-                kept.extend(d2[..k - trim].iter().map(|x| x.1));
-                match self.ls_coords(model, p, &kept) {
+                sc.d2.clear();
+                sc.d2
+                    .extend((0..k).map(|i| (frame_dist2(&model.m, fr[i], &y[i], &s), i as u32)));
+                sc.d2
+                    .select_nth_unstable_by(kk - 1, |a, b| a.0.total_cmp(&b.0));
+                match normal_solve(&model.m, fr, y, sc.d2[..kk].iter().map(|x| x.1 as usize)) {
                     Some(s2) => s = s2,
                     None => break,
                 }
             }
+        } else {
+            sc.d2.clear();
+            sc.d2.extend((0..k).map(|i| (0.0, i as u32)));
         }
-        let ss: f64 = kept
+        let ss: f64 = sc.d2[..kk]
             .iter()
-            .map(|&fr| self.dist2(model, p, fr as usize, &s))
+            .map(|x| {
+                let i = x.1 as usize;
+                frame_dist2(&model.m, fr[i], &y[i], &s)
+            })
             .sum();
-        let kk = kept.len();
         let alpha = trim as f64 / k as f64;
         let c = if alpha > 0.0 {
             1.0 + alpha * alpha.ln() / (1.0 - alpha)
@@ -415,24 +499,28 @@ impl TrackSubspace {
         let mut coords: Vec<Option<[f64; 3]>> = vec![None; inliers.len()];
         let mut last_cost = f64::INFINITY;
         let chi2_cut = super::chi2_quantile(2.0, 0.999);
-        let mut frames_buf: Vec<u32> = Vec::new();
         for sweep in 0..sweeps.max(1) {
-            // S-step.
-            for (j, &p) in inliers.iter().enumerate() {
-                frames_buf.clear();
-                frames_buf.extend(
-                    self.frames_of[p]
-                        .iter()
-                        .zip(&keep[j])
-                        .filter(|(fr, k)| **k && model.defined[**fr as usize])
-                        .map(|(fr, _)| *fr),
-                );
-                coords[j] = if frames_buf.len() >= 2 {
-                    self.ls_coords(&model, p, &frames_buf)
-                } else {
-                    None
-                };
-            }
+            // S-step (parallel over tracks; each solve is independent).
+            coords = inliers
+                .par_iter()
+                .zip(keep.par_iter())
+                .with_min_len(64)
+                .map_init(Vec::new, |frames_buf: &mut Vec<u32>, (&p, kp)| {
+                    frames_buf.clear();
+                    frames_buf.extend(
+                        self.frames_of[p]
+                            .iter()
+                            .zip(kp)
+                            .filter(|(fr, k)| **k && model.defined[**fr as usize])
+                            .map(|(fr, _)| *fr),
+                    );
+                    if frames_buf.len() >= 2 {
+                        self.ls_coords(&model, p, frames_buf)
+                    } else {
+                        None
+                    }
+                })
+                .collect();
             // M-step: per frame, [m_x t_x; m_y t_y] from Σ [s;1][s;1]ᵀ.
             let mut a = vec![Matrix4::<f64>::zeros(); f];
             let mut bx = vec![Vector4::<f64>::zeros(); f];
@@ -514,7 +602,7 @@ impl TrackSubspace {
                     }
                 }
             }
-            if sweep > 1 && (last_cost - cost).abs() <= 1e-9 * last_cost.max(1e-300) {
+            if sweep > 1 && (last_cost - cost).abs() <= ALS_TOLERANCE * last_cost.max(1e-300) {
                 break;
             }
             last_cost = cost;
@@ -626,6 +714,16 @@ impl Estimator for TrackSubspace {
 
     fn residual(&self, model: &AffineSubspace, item: usize) -> Option<f64> {
         self.track_fit(model, item).map(|t| t.rms)
+    }
+
+    /// All tracks' residuals, in parallel over tracks (rayon; each residual is independent
+    /// of the others, so the result does not depend on the thread count).
+    fn residuals(&self, model: &AffineSubspace, n: usize) -> Vec<Option<f64>> {
+        (0..n)
+            .into_par_iter()
+            .with_min_len(128)
+            .map(|p| self.track_fit(model, p).map(|t| t.rms))
+            .collect()
     }
 
     fn refit(&self, model: &AffineSubspace, inliers: &[usize]) -> Option<AffineSubspace> {
