@@ -390,3 +390,21 @@ fn too_small_tables_are_errors() {
         Err(Error::TooFew { .. })
     ));
 }
+
+/// A clean Gaussian-cloud scene (small image spread relative to the noise) is rigid: the
+/// default pipeline, robust pass included, must reconstruct it and keep every track.
+#[test]
+fn clean_cloud_scene_passes_the_default_pipeline() {
+    let scene = generate(&SynthConfig {
+        shape: Shape::Cloud,
+        frames: 30,
+        points: 200,
+        noise: 0.5,
+        seed: 1,
+        ..Default::default()
+    })
+    .unwrap();
+    let rec = Reconstruction::from_tracks(&scene.table, &Config::default()).unwrap();
+    assert_eq!(rec.robust.as_ref().unwrap().n_outlier_tracks, 0);
+    assert!(rec.rms_px < 0.55, "rms {}", rec.rms_px);
+}
