@@ -200,8 +200,8 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     let rec = rank3::recording::reconstruct_recorded(recording.as_ref(), t, &config)?;
     #[cfg(not(feature = "rerun"))]
     let rec = Reconstruction::from_tracks(t, &config)?;
-    let written = rank3::output::write_all(&rec, &a.out)?;
-    print_summary(&rec, &written.json, &a.out);
+    rank3::output::write_all(&rec, &a.out)?;
+    print_summary(&rec, &a.out);
     Ok(())
 }
 
@@ -237,7 +237,7 @@ impl ReconstructOpts {
     }
 }
 
-fn print_summary(rec: &Reconstruction, json: &Path, out: &Path) {
+fn print_summary(rec: &Reconstruction, out: &Path) {
     for s in &rec.set_aside {
         eprintln!("set aside {:?} {}: {}", s.kind, s.id, s.reason);
     }
@@ -296,7 +296,6 @@ fn print_summary(rec: &Reconstruction, json: &Path, out: &Path) {
         rec.rms_px,
         out.display()
     );
-    let _ = json;
 }
 
 fn synth(a: &SynthArgs) -> Result<(), rank3::Error> {
@@ -583,7 +582,7 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
     let rec = Reconstruction::from_tracks_observed(&table, &config, &mut obs);
     spinner.finish_and_clear();
     let rec = rec?;
-    let written = rank3::output::write_all(&rec, &a.out)?;
-    print_summary(&rec, &written.json, &a.out);
+    rank3::output::write_all(&rec, &a.out)?;
+    print_summary(&rec, &a.out);
     Ok(())
 }
