@@ -1,11 +1,18 @@
 //! Cost of a Rerun recording on a 100-frame × 2000-track synthetic run: pipeline time with
-//! and without recording, the time of each logging step, and the .rrd file size.
+//! and without recording, the time of each logging step, the process CPU time, and the .rrd
+//! file size.
 //!
-//! `cargo run --release --example recording_overhead [FRAMES TRACKS]`
+//! `cargo run --release --example recording_overhead [FRAMES TRACKS [RUNS]]`
+//!
+//! The recorded run is what `rank3 reconstruct --rrd` does ([`recording::reconstruct_recorded`]:
+//! input, observer events, result and robust pass), opening and closing the .rrd included.
+//! Plain and recorded runs alternate so that a change in machine load hits both alike; the
+//! figures are medians over `RUNS` (default 9) pairs, plus the median of the per-pair
+//! differences.
 
 use std::time::Instant;
 
-use rank3::recording::{self, RecordingObserver};
+use rank3::recording;
 use rank3::synth::{Shape, SynthConfig, generate};
 use rank3::{Config, Reconstruction};
 
@@ -15,14 +22,33 @@ fn median(v: &[f64]) -> f64 {
     v[v.len() / 2]
 }
 
+/// CPU time (user + system, all threads) of this process in seconds, from /proc (Linux);
+/// NaN elsewhere.
+fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return f64::NAN;
+    };
+    let Some(end) = stat.rfind(')') else {
+        return f64::NAN;
+    };
+    let fields: Vec<&str> = stat[end + 1..].split_whitespace().collect();
+    // Fields 14 and 15 of stat(5) (utime, stime), counted after the command name.
+    let ticks = |i: usize| fields.get(i).and_then(|v| v.parse::<f64>().ok());
+    match (ticks(11), ticks(12)) {
+        (Some(u), Some(s)) => (u + s) / 100.0,
+        _ => f64::NAN,
+    }
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<usize> = std::env::args()
         .skip(1)
         .filter_map(|a| a.parse().ok())
         .collect();
-    let (frames, points) = (
+    let (frames, points, runs) = (
         args.first().copied().unwrap_or(100),
         args.get(1).copied().unwrap_or(2000),
+        args.get(2).copied().unwrap_or(9).max(1),
     );
     let scene = generate(&SynthConfig {
         shape: Shape::Cloud,
@@ -37,67 +63,70 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::env::temp_dir().join(format!("rank3-overhead-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let path = dir.join("run.rrd");
-    let runs = 5;
 
-    let mut plain = Vec::new();
+    let (mut plain, mut plain_cpu, mut total, mut total_cpu) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut open, mut pipeline, mut close) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..runs {
-        let t0 = Instant::now();
+        let (c0, t0) = (cpu_seconds(), Instant::now());
         let r = Reconstruction::from_tracks(table, &config)?;
         plain.push(t0.elapsed().as_secs_f64());
+        plain_cpu.push(cpu_seconds() - c0);
+        std::hint::black_box(r);
+
+        let (c0, t0) = (cpu_seconds(), Instant::now());
+        let rec = rerun::RecordingStreamBuilder::new("rank3-overhead").save(&path)?;
+        let t1 = Instant::now();
+        let r = recording::reconstruct_recorded(Some(&rec), table, &config)?;
+        let t2 = Instant::now();
+        drop(rec); // flush + footer
+        let t3 = Instant::now();
+        total.push((t3 - t0).as_secs_f64());
+        total_cpu.push(cpu_seconds() - c0);
+        open.push((t1 - t0).as_secs_f64());
+        pipeline.push((t2 - t1).as_secs_f64());
+        close.push((t3 - t2).as_secs_f64());
         std::hint::black_box(r);
     }
-
-    let (mut total, mut input, mut pipeline, mut result, mut flush) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for _ in 0..runs {
-        let t0 = Instant::now();
-        let rec = rerun::RecordingStreamBuilder::new("rank3-overhead").save(&path)?;
-        recording::log_input(&rec, table)?;
-        let t1 = Instant::now();
-        let mut obs = RecordingObserver::new(&rec);
-        let r = Reconstruction::from_tracks_observed(table, &config, &mut obs)?;
-        let t2 = Instant::now();
-        recording::log_reconstruction(&rec, table, &r)?;
-        let t3 = Instant::now();
-        drop(obs);
-        drop(rec); // flush + footer
-        let t4 = Instant::now();
-        total.push((t4 - t0).as_secs_f64());
-        input.push((t1 - t0).as_secs_f64());
-        pipeline.push((t2 - t1).as_secs_f64());
-        result.push((t3 - t2).as_secs_f64());
-        flush.push((t4 - t3).as_secs_f64());
-    }
     let size = std::fs::metadata(&path)?.len();
-    let (p, t) = (median(&plain), median(&total));
+    let diffs: Vec<f64> = total.iter().zip(&plain).map(|(t, p)| t - p).collect();
+    let cpu_diffs: Vec<f64> = total_cpu
+        .iter()
+        .zip(&plain_cpu)
+        .map(|(t, p)| t - p)
+        .collect();
+    let (p, t, d) = (median(&plain), median(&total), median(&diffs));
     let profile = if cfg!(debug_assertions) {
         "debug"
     } else {
         "release"
     };
     println!(
-        "{frames} frames × {points} tracks, {} observations (median of {runs} runs, {profile})",
+        "{frames} frames × {points} tracks, {} observations ({runs} alternating pairs, {profile})",
         table.n_observed()
     );
-    println!("pipeline without recording: {:.1} ms", 1e3 * p);
-    println!("pipeline with recording:    {:.1} ms", 1e3 * t);
     println!(
-        "  log_input {:.1} ms, pipeline+observer {:.1} ms, log_reconstruction {:.1} ms, \
-         flush {:.1} ms",
-        1e3 * median(&input),
-        1e3 * median(&pipeline),
-        1e3 * median(&result),
-        1e3 * median(&flush)
+        "pipeline without recording: {:.1} ms wall, {:.1} ms CPU",
+        1e3 * p,
+        1e3 * median(&plain_cpu)
     );
-    // Logging proper (the observer's share inside the pipeline is a handful of log calls).
-    let logging = median(&input) + median(&result) + median(&flush);
     println!(
-        "overhead: logging {:.1} ms = {:.1} % of the pipeline without recording; \
-         end-to-end difference {:.1} ms = {:.1} %",
-        1e3 * logging,
-        100.0 * logging / p,
-        1e3 * (t - p),
-        100.0 * (t - p) / p
+        "pipeline with recording:    {:.1} ms wall, {:.1} ms CPU",
+        1e3 * t,
+        1e3 * median(&total_cpu)
+    );
+    println!(
+        "  open .rrd {:.1} ms, pipeline + logging {:.1} ms, flush + close {:.1} ms",
+        1e3 * median(&open),
+        1e3 * median(&pipeline),
+        1e3 * median(&close)
+    );
+    println!(
+        "overhead (median of per-pair differences): wall {:.1} ms = {:.1} %, CPU {:.1} ms = {:.1} %",
+        1e3 * d,
+        100.0 * d / p,
+        1e3 * median(&cpu_diffs),
+        100.0 * median(&cpu_diffs) / median(&plain_cpu)
     );
     println!(".rrd size: {:.2} MB ({} bytes)", size as f64 / 1e6, size);
     std::fs::remove_dir_all(&dir).ok();

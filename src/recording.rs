@@ -23,10 +23,10 @@
 //! | path | archetype | what |
 //! |---|---|---|
 //! | `image/tracks` | Points2D per frame | observed positions, class id = track index |
-//! | `image/trajectories` | LineStrips2D | one strip per input track |
+//! | `image/trajectories` | LineStrips2D | one strip per input track; from stage `robust` on coloured green (inlier) / red (outlier) |
 //! | `image/set_aside/{points,trajectories}` | Points2D / LineStrips2D | set-aside tracks, red |
 //! | `image/residuals` | Arrows2D per frame | observed → predicted (metric model) |
-//! | `image/robust/{inliers,outliers,flagged}` | LineStrips2D / Points2D | robust pass |
+//! | `image/robust/{outliers,flagged}` | LineStrips2D / Points2D | robust pass: outlier tracks (labelled), flagged entries |
 //! | `factorization/visibility` | Image (L8) | F×N mask, white = observed |
 //! | `factorization/W` | Tensor (f32) | the kept 2F'×N' measurement matrix |
 //! | `factorization/singular_values` | BarChart | every computed σ |
@@ -52,17 +52,29 @@
 //! [`RecordingOptions::max_residual_arrows_per_frame`] (evenly spaced tracks). Both are
 //! generous by default; see the crate README for measured file sizes and overhead.
 //!
+//! Per-frame data go out as one chunk per entity (`send_columns`) with the Arrow arrays built
+//! directly from flat buffers, so the SDK neither serializes 10⁵ points one by one nor
+//! re-batches a hundred rows.
+//!
 //! Cost: O(F·N) for the per-frame data (points, arrows, mask, W), O(N + F) for the rest.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
+use rerun::external::arrow::array::{
+    ArrayRef, FixedSizeListArray, Float32Array, ListArray, UInt16Array,
+};
+use rerun::external::arrow::buffer::OffsetBuffer;
+use rerun::external::arrow::datatypes::{DataType, Field};
+use rerun::external::arrow::error::ArrowError;
 use rerun::external::re_uri;
 use rerun::sink::LogSink;
 use rerun::{
-    AnnotationContext, Arrows2D, Arrows3D, BarChart, ClassDescription, Image, LineStrip2D,
-    LineStrip3D, LineStrips2D, LineStrips3D, Points2D, Points3D, Radius, RecordingStream,
-    RecordingStreamBuilder, RecordingStreamError, Scalars, Tensor, TensorBuffer, TensorData,
-    TextDocument, TextLog, TextLogLevel, Transform3D,
+    AnnotationContext, Arrows2D, Arrows3D, BarChart, ClassDescription, Image, LineStrip3D,
+    LineStrips2D, LineStrips3D, Points2D, Points3D, Radius, RecordingStream,
+    RecordingStreamBuilder, RecordingStreamError, Scalars, SerializedComponentBatch,
+    SerializedComponentColumn, Tensor, TensorBuffer, TensorData, TextDocument, TextLog,
+    TextLogLevel, TimeColumn, Transform3D,
 };
 
 use crate::metric::UpgradeMethod;
@@ -95,7 +107,6 @@ pub mod paths {
     pub const SET_ASIDE_POINTS: &str = "image/set_aside/points";
     pub const SET_ASIDE_TRAJECTORIES: &str = "image/set_aside/trajectories";
     pub const RESIDUAL_ARROWS: &str = "image/residuals";
-    pub const ROBUST_INLIERS: &str = "image/robust/inliers";
     pub const ROBUST_OUTLIERS: &str = "image/robust/outliers";
     pub const ROBUST_FLAGGED: &str = "image/robust/flagged";
     pub const ROBUST_INLIER_COUNT: &str = "solver/ransac/inliers";
@@ -134,6 +145,15 @@ pub enum RecordingError {
     /// The data handed to a log function do not fit together.
     #[error(transparent)]
     Input(#[from] Error),
+    /// Building an Arrow array for a bulk log call failed (an internal inconsistency).
+    #[error("rerun recording: arrow: {0}")]
+    Arrow(#[from] ArrowError),
+}
+
+impl From<rerun::SerializationError> for RecordingError {
+    fn from(e: rerun::SerializationError) -> Self {
+        Self::Stream(e.into())
+    }
 }
 
 /// Result of the log functions.
@@ -145,6 +165,9 @@ impl From<RecordingError> for Error {
         match e {
             RecordingError::Input(e) => e,
             RecordingError::Stream(e) => {
+                Error::io("rerun recording", std::io::Error::other(e.to_string()))
+            }
+            RecordingError::Arrow(e) => {
                 Error::io("rerun recording", std::io::Error::other(e.to_string()))
             }
         }
@@ -444,9 +467,150 @@ fn heat(t: f64) -> [u8; 3] {
     }
 }
 
-/// A track's observed positions in frame order (gaps bridged).
-fn trajectory(table: &TrackTable, p: usize) -> LineStrip2D {
-    LineStrip2D::from_iter((0..table.n_frames()).filter_map(|f| table.get(f, p).map(f2)))
+/// The Arrow field of Rerun's `Vec2D` datatype (2D positions and vectors are
+/// `FixedSizeList<2, f32>` of this field).
+fn vec2_field() -> Arc<Field> {
+    Arc::new(Field::new("item", DataType::Float32, false))
+}
+
+/// `[x0, y0, x1, y1, …]` as a `Vec2D` Arrow array, built in one move instead of element by
+/// element (the SDK's generic serializer costs several times more on 10⁵ points).
+fn vec2_array(flat: Vec<f32>) -> RecordingResult<ArrayRef> {
+    Ok(Arc::new(FixedSizeListArray::try_new(
+        vec2_field(),
+        2,
+        Arc::new(Float32Array::from(flat)),
+        None,
+    )?))
+}
+
+/// `LineStrip2D` components (lists of `Vec2D`) from the strips' concatenated points and
+/// their lengths.
+fn strips_array(flat: Vec<f32>, lengths: &[usize]) -> RecordingResult<ArrayRef> {
+    let item = Arc::new(Field::new(
+        "item",
+        DataType::FixedSizeList(vec2_field(), 2),
+        false,
+    ));
+    Ok(Arc::new(ListArray::try_new(
+        item,
+        OffsetBuffer::from_lengths(lengths.iter().copied()),
+        vec2_array(flat)?,
+        None,
+    )?))
+}
+
+/// Class ids (`u16`) as an Arrow array.
+fn class_id_array(ids: Vec<u16>) -> ArrayRef {
+    Arc::new(UInt16Array::from(ids))
+}
+
+/// The observed positions of `tracks` in frame order (gaps bridged), concatenated, with
+/// each track's number of points.
+fn trajectories(table: &TrackTable, tracks: &[usize]) -> (Vec<f32>, Vec<usize>) {
+    let mut flat = Vec::new();
+    let mut lengths = Vec::with_capacity(tracks.len());
+    for &p in tracks {
+        let before = flat.len();
+        for f in 0..table.n_frames() {
+            if let Some([x, y]) = table.get(f, p) {
+                flat.extend([x as f32, y as f32]);
+            }
+        }
+        lengths.push((flat.len() - before) / 2);
+    }
+    (flat, lengths)
+}
+
+/// `LineStrips2D` of the trajectories of `tracks`, with their class ids.
+fn trajectory_batches(
+    table: &TrackTable,
+    tracks: &[usize],
+) -> RecordingResult<[SerializedComponentBatch; 2]> {
+    let (flat, lengths) = trajectories(table, tracks);
+    Ok([
+        SerializedComponentBatch::new(
+            strips_array(flat, &lengths)?,
+            LineStrips2D::descriptor_strips(),
+        ),
+        SerializedComponentBatch::new(
+            class_id_array(tracks.iter().map(|&p| class_id(p)).collect()),
+            LineStrips2D::descriptor_class_ids(),
+        ),
+    ])
+}
+
+/// Per-frame observed points of `tracks` for the given `frames`: concatenated positions,
+/// class ids and the number of points per frame.
+fn frame_points(
+    table: &TrackTable,
+    frames: &[usize],
+    tracks: &[usize],
+) -> (Vec<f32>, Vec<u16>, Vec<usize>) {
+    let mut flat = Vec::new();
+    let mut ids = Vec::new();
+    let mut lengths = Vec::with_capacity(frames.len());
+    for &f in frames {
+        let before = ids.len();
+        for &p in tracks {
+            if let Some([x, y]) = table.get(f, p) {
+                flat.extend([x as f32, y as f32]);
+                ids.push(class_id(p));
+            }
+        }
+        lengths.push(ids.len() - before);
+    }
+    (flat, ids, lengths)
+}
+
+/// Sends one row per frame of an entity as a single chunk (`send_columns`): row `k` on the
+/// `frame` timeline at `frames[k]` and on the `stage` timeline at `stage`. One chunk instead
+/// of a log call per frame spares the SDK's batcher from re-assembling 10⁵ points.
+fn send_per_frame(
+    rec: &RecordingStream,
+    path: &str,
+    stage: &str,
+    frames: &[usize],
+    columns: Vec<SerializedComponentColumn>,
+) -> RecordingResult {
+    let stage = stage_index(stage).unwrap_or(STAGES.len() as i64);
+    rec.send_columns(
+        path,
+        [
+            TimeColumn::new_sequence(TIMELINE_FRAME, frames.iter().map(|&f| f as i64)),
+            TimeColumn::new_sequence(TIMELINE_STAGE, std::iter::repeat_n(stage, frames.len())),
+        ],
+        columns,
+    )?;
+    Ok(())
+}
+
+/// Per-frame `Points2D` rows (positions, class ids, one colour and radius per row) of the
+/// observed entries of `tracks`, sent with [`send_per_frame`].
+fn send_frame_points(
+    rec: &RecordingStream,
+    path: &str,
+    stage: &str,
+    table: &TrackTable,
+    tracks: &[usize],
+    color: Option<[u8; 3]>,
+    radius: f32,
+) -> RecordingResult {
+    let frames: Vec<usize> = (0..table.n_frames()).collect();
+    let (flat, ids, lengths) = frame_points(table, &frames, tracks);
+    let mut columns = vec![
+        SerializedComponentBatch::new(vec2_array(flat)?, Points2D::descriptor_positions())
+            .partitioned(lengths.iter().copied())?,
+        SerializedComponentBatch::new(class_id_array(ids), Points2D::descriptor_class_ids())
+            .partitioned(lengths.iter().copied())?,
+    ];
+    let mut rows =
+        Points2D::update_fields().with_radii(vec![Radius::new_ui_points(radius); frames.len()]);
+    if let Some(c) = color {
+        rows = rows.with_colors(vec![c; frames.len()]);
+    }
+    columns.extend(rows.columns_of_unit_batches()?);
+    send_per_frame(rec, path, stage, &frames, columns)
 }
 
 /// Logs the input table: per-frame observed points on `image/tracks` (class id = track
@@ -476,25 +640,9 @@ pub fn log_input_with(
         rec.log_static("affine", &ctx)?;
         rec.log_static(paths::TRUTH_ROOT, &ctx)?;
     }
-    rec.log(
-        paths::TRAJECTORIES,
-        &LineStrips2D::new((0..n).map(|p| trajectory(table, p)))
-            .with_class_ids((0..n).map(class_id)),
-    )?;
-    for f in 0..table.n_frames() {
-        rec.set_time_sequence(TIMELINE_FRAME, f as i64);
-        let (pos, ids): (Vec<[f32; 2]>, Vec<u16>) = (0..n)
-            .filter_map(|p| table.get(f, p).map(|xy| (f2(xy), class_id(p))))
-            .unzip();
-        rec.log(
-            paths::TRACKS,
-            &Points2D::new(pos)
-                .with_class_ids(ids)
-                .with_radii([Radius::new_ui_points(2.0)]),
-        )?;
-    }
-    rec.disable_timeline(TIMELINE_FRAME);
-    Ok(())
+    let all: Vec<usize> = (0..n).collect();
+    rec.log(paths::TRAJECTORIES, &trajectory_batches(table, &all)?)?;
+    send_frame_points(rec, paths::TRACKS, "input", table, &all, None, 2.0)
 }
 
 /// Every-k-th index so that at most `max` remain.
@@ -591,31 +739,27 @@ fn log_set_aside(rec: &RecordingStream, table: &TrackTable, r: &Reconstruction) 
     if aside.is_empty() {
         return Ok(());
     }
+    let labels = LineStrips2D::update_fields()
+        .with_colors([RED])
+        .with_labels(
+            aside
+                .iter()
+                .map(|&p| format!("set aside: track {}", table.track_ids()[p])),
+        );
+    let [strips, ids] = trajectory_batches(table, &aside)?;
     rec.log(
         paths::SET_ASIDE_TRAJECTORIES,
-        &LineStrips2D::new(aside.iter().map(|&p| trajectory(table, p)))
-            .with_colors([RED])
-            .with_labels(
-                aside
-                    .iter()
-                    .map(|&p| format!("set aside: track {}", table.track_ids()[p])),
-            ),
+        &[&strips as &dyn rerun::AsComponents, &ids, &labels],
     )?;
-    for f in 0..table.n_frames() {
-        rec.set_time_sequence(TIMELINE_FRAME, f as i64);
-        let pos: Vec<[f32; 2]> = aside
-            .iter()
-            .filter_map(|&p| table.get(f, p).map(f2))
-            .collect();
-        rec.log(
-            paths::SET_ASIDE_POINTS,
-            &Points2D::new(pos)
-                .with_colors([RED])
-                .with_radii([Radius::new_ui_points(3.0)]),
-        )?;
-    }
-    rec.disable_timeline(TIMELINE_FRAME);
-    Ok(())
+    send_frame_points(
+        rec,
+        paths::SET_ASIDE_POINTS,
+        "set-aside",
+        table,
+        &aside,
+        Some(RED),
+        3.0,
+    )
 }
 
 fn log_factorization(
@@ -825,30 +969,48 @@ fn log_residuals(
         &BarChart::new(r.points.iter().map(|p| p.rms_px).collect::<Vec<f64>>()),
     )?;
     let tracks = subsample(r.kept_tracks.len(), options.max_residual_arrows_per_frame);
+    let mut origins = Vec::new();
+    let mut vectors = Vec::new();
+    let mut ids = Vec::new();
+    let mut lengths = Vec::with_capacity(r.kept_frames.len());
     for (kf, &fi) in r.kept_frames.iter().enumerate() {
-        rec.set_time_sequence(TIMELINE_FRAME, fi as i64);
-        let mut origins = Vec::with_capacity(tracks.len());
-        let mut vectors = Vec::with_capacity(tracks.len());
-        let mut ids = Vec::with_capacity(tracks.len());
+        let before = ids.len();
         for &kp in &tracks {
             let pi = r.kept_tracks[kp];
             if let Some(obs) = table.get(fi, pi) {
                 let q = r.model.project(kf, kp);
-                origins.push(f2(obs));
-                vectors.push([(q[0] - obs[0]) as f32, (q[1] - obs[1]) as f32]);
+                origins.extend([obs[0] as f32, obs[1] as f32]);
+                vectors.extend([(q[0] - obs[0]) as f32, (q[1] - obs[1]) as f32]);
                 ids.push(class_id(pi));
             }
         }
-        rec.log(
-            paths::RESIDUAL_ARROWS,
-            &Arrows2D::from_vectors(vectors)
-                .with_origins(origins)
-                .with_class_ids(ids),
-        )?;
-        rec.log(paths::FRAME_RMS, &Scalars::single(r.frames[kf].rms_px))?;
+        lengths.push(ids.len() - before);
     }
-    rec.disable_timeline(TIMELINE_FRAME);
-    Ok(())
+    let columns = vec![
+        SerializedComponentBatch::new(vec2_array(vectors)?, Arrows2D::descriptor_vectors())
+            .partitioned(lengths.iter().copied())?,
+        SerializedComponentBatch::new(vec2_array(origins)?, Arrows2D::descriptor_origins())
+            .partitioned(lengths.iter().copied())?,
+        SerializedComponentBatch::new(class_id_array(ids), Arrows2D::descriptor_class_ids())
+            .partitioned(lengths.iter().copied())?,
+    ];
+    send_per_frame(
+        rec,
+        paths::RESIDUAL_ARROWS,
+        "refine",
+        &r.kept_frames,
+        columns,
+    )?;
+    let rms = Scalars::update_fields()
+        .with_scalars(r.frames.iter().map(|f| f.rms_px))
+        .columns_of_unit_batches()?;
+    send_per_frame(
+        rec,
+        paths::FRAME_RMS,
+        "refine",
+        &r.kept_frames,
+        rms.collect(),
+    )
 }
 
 /// The markdown run summary logged on `summary`: inputs, choices, results, timings,
@@ -935,8 +1097,10 @@ pub fn log_error(rec: &RecordingStream, error: &Error) -> RecordingResult {
     Ok(())
 }
 
-/// Logs the robust (RANSAC) pass at stage `robust`: inlier tracks' trajectories in green on
-/// `image/robust/inliers`, outlier tracks' in red (labelled) on `image/robust/outliers`,
+/// Logs the robust (RANSAC) pass at stage `robust`: a colour per input trajectory on
+/// `image/trajectories` (green inlier, red outlier; the strips logged by [`log_input`] keep
+/// their positions), the outlier tracks' trajectories in red (labelled) on
+/// `image/robust/outliers`,
 /// flagged entries as orange points per frame on `image/robust/flagged`, and the inlier count
 /// per RANSAC iteration on `solver/ransac/inliers` (`iteration` timeline).
 ///
@@ -977,18 +1141,26 @@ pub fn log_robust(
     at_stage(rec, "robust");
     let (inl, outl): (Vec<usize>, Vec<usize>) =
         (0..table.n_tracks()).partition(|&p| inlier_tracks[p]);
+    // The input trajectories turn green (inlier) or red (outlier) from this stage on: a
+    // colour column, not a second copy of every trajectory.
     rec.log(
-        paths::ROBUST_INLIERS,
-        &LineStrips2D::new(inl.iter().map(|&p| trajectory(table, p))).with_colors([GREEN]),
+        paths::TRAJECTORIES,
+        &LineStrips2D::update_fields().with_colors(
+            inlier_tracks
+                .iter()
+                .map(|&inlier| if inlier { GREEN } else { RED }),
+        ),
     )?;
+    let labels = LineStrips2D::update_fields()
+        .with_colors([RED])
+        .with_labels(
+            outl.iter()
+                .map(|&p| format!("outlier track {}", table.track_ids()[p])),
+        );
+    let [strips, ids] = trajectory_batches(table, &outl)?;
     rec.log(
         paths::ROBUST_OUTLIERS,
-        &LineStrips2D::new(outl.iter().map(|&p| trajectory(table, p)))
-            .with_colors([RED])
-            .with_labels(
-                outl.iter()
-                    .map(|&p| format!("outlier track {}", table.track_ids()[p])),
-            ),
+        &[&strips as &dyn rerun::AsComponents, &ids, &labels],
     )?;
     rec.log(
         paths::LOG_STAGES,
@@ -1064,4 +1236,42 @@ pub fn log_synth_truth(rec: &RecordingStream, scene: &SynthScene) -> RecordingRe
         .with_level(TextLogLevel::INFO),
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rerun::Loggable;
+
+    /// The hand-built Arrow arrays must have exactly the types the SDK's serializers produce
+    /// (a Rerun upgrade that changes them fails here, not in the viewer).
+    #[test]
+    fn bulk_arrays_match_the_sdk_types() {
+        let pts = vec2_array(vec![1.0, 2.0, 3.0, 4.0]).unwrap();
+        assert_eq!(pts.data_type(), &rerun::datatypes::Vec2D::arrow_datatype());
+        assert_eq!(
+            pts.data_type(),
+            &rerun::components::Position2D::arrow_datatype()
+        );
+        assert_eq!(
+            pts.data_type(),
+            &rerun::components::Vector2D::arrow_datatype()
+        );
+        assert_eq!(pts.len(), 2);
+        let strips = strips_array(vec![0.0; 10], &[2, 0, 3]).unwrap();
+        assert_eq!(
+            strips.data_type(),
+            &rerun::components::LineStrip2D::arrow_datatype()
+        );
+        assert_eq!(strips.len(), 3);
+        assert!(
+            strips_array(vec![0.0; 10], &[2, 4]).is_err(),
+            "lengths beyond the data"
+        );
+        let ids = class_id_array(vec![1, 2]);
+        assert_eq!(
+            ids.data_type(),
+            &rerun::components::ClassId::arrow_datatype()
+        );
+    }
 }

@@ -54,6 +54,24 @@ impl Contents {
             })
     }
 
+    /// Colours (RGB) logged to `entity` under `component` (all rows concatenated).
+    fn colors(&self, entity: &str, component: rerun::ComponentIdentifier) -> Vec<[u8; 3]> {
+        let mut out = Vec::new();
+        for c in self
+            .chunks
+            .iter()
+            .filter(|c| c.entity_path().to_string().trim_start_matches('/') == entity)
+        {
+            for row in c.iter_component::<rerun::components::Color>(component) {
+                out.extend(row.iter().map(|c| {
+                    let [r, g, b, _] = c.to_array();
+                    [r, g, b]
+                }));
+            }
+        }
+        out
+    }
+
     /// Positions logged to `entity` (all rows concatenated).
     fn positions3(&self, entity: &str) -> Vec<[f32; 3]> {
         let id = rerun::Points3D::descriptor_positions().component;
@@ -303,10 +321,17 @@ fn recording_round_trips_through_the_rerun_decoder() {
     assert_eq!(c.get(paths::SUMMARY, "TextDocument:text").rows(), 1);
 
     // Robust pass.
-    assert_eq!(
-        c.get(paths::ROBUST_INLIERS, "LineStrips2D:strips").total(),
-        n_all - 2
+    // The input trajectories get one colour each at the robust stage: red for the two
+    // outliers (tracks 0 and n − 1), green for the rest.
+    let colours = c.get(paths::TRAJECTORIES, "LineStrips2D:colors");
+    assert_eq!((colours.rows(), colours.total()), (1, n_all));
+    assert_eq!(colours.times["stage"], vec![2]);
+    let rgb = c.colors(
+        paths::TRAJECTORIES,
+        rerun::LineStrips2D::descriptor_colors().component,
     );
+    let red: Vec<usize> = (0..n_all).filter(|&p| rgb[p][0] > rgb[p][1]).collect();
+    assert_eq!(red, vec![0, n_all - 1]);
     assert_eq!(
         c.get(paths::ROBUST_OUTLIERS, "LineStrips2D:strips").total(),
         2
