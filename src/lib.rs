@@ -42,7 +42,7 @@ pub mod tracks;
 pub use camera::{CameraModel, MetricModel};
 pub use error::{Error, Result};
 pub use measurements::Measurements;
-pub use observer::{Event, NoopObserver, Observer};
+pub use observer::{Both, Event, NoopObserver, Observer};
 pub use reconstruction::{Config, Reconstruction};
 pub use solver::{SolverReport, SolverStatus};
 pub use tracks::{Id, TrackTable};

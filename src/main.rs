@@ -420,6 +420,9 @@ struct TrackArgs {
     out: PathBuf,
     #[command(flatten)]
     opts: TrackOpts,
+    #[cfg(feature = "rerun")]
+    #[command(flatten)]
+    record: rank3::recording::RecordingArgs,
 }
 
 #[derive(clap::Args)]
@@ -440,6 +443,9 @@ struct RunArgs {
     complete_tracks: bool,
     #[command(flatten)]
     recon: ReconstructOpts,
+    #[cfg(feature = "rerun")]
+    #[command(flatten)]
+    record: rank3::recording::RecordingArgs,
 }
 
 fn bar_style(template: &str) -> indicatif::ProgressStyle {
@@ -447,11 +453,16 @@ fn bar_style(template: &str) -> indicatif::ProgressStyle {
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
 }
 
+/// What tracking produced: the table and the per-frame counts.
+struct Tracked {
+    table: rank3::TrackTable,
+    /// Per-frame counts (recorded with `--rrd`).
+    #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
+    stats: Vec<rank3::track::FrameStats>,
+}
+
 /// Tracks `input` with a progress bar; prints a summary to stderr.
-fn track_input(
-    input: &Path,
-    opts: &TrackOpts,
-) -> Result<(rank3::TrackTable, rank3::track::TrackSummary), rank3::Error> {
+fn track_input(input: &Path, opts: &TrackOpts) -> Result<Tracked, rank3::Error> {
     let cfg = opts.config();
     let init = opts
         .init_points
@@ -469,9 +480,11 @@ fn track_input(
     };
     let t0 = std::time::Instant::now();
     let cpu0 = process_cpu_seconds();
+    let mut stats = Vec::new();
     let result = rank3::track::track_source(&mut src, &cfg, init, &mut |s| {
         bar.inc(1);
         bar.set_message(format!("{} alive", s.alive));
+        stats.push(*s);
     });
     bar.finish_and_clear();
     let (table, summary) = result?;
@@ -502,7 +515,29 @@ fn track_input(
         summary.frames as f64 / wall.max(1e-9),
         cpu.map_or(String::new(), |c| format!(", CPU {c:.3} s with decoding"))
     );
-    Ok((table, summary))
+    Ok(Tracked { table, stats })
+}
+
+/// Records a tracking run: the frames (decoded a second time, JPEG-encoded), the tracker's
+/// per-frame counts, and the track table (points per frame and trajectories).
+#[cfg(feature = "rerun")]
+fn record_tracking(
+    rec: &rerun::RecordingStream,
+    input: &Path,
+    tracked: &Tracked,
+    log_table: bool,
+) -> Result<(), rank3::Error> {
+    let mut src = rank3::track::FrameSource::open(input)?;
+    let mut index = 0;
+    while let Some((_, image)) = src.next_frame()? {
+        rank3::recording::log_frame(rec, index, &image, 85)?;
+        index += 1;
+    }
+    rank3::recording::log_tracking(rec, &tracked.stats)?;
+    if log_table {
+        rank3::recording::log_input(rec, &tracked.table)?;
+    }
+    Ok(())
 }
 
 /// CPU seconds (user + system, all threads) of this process so far; Linux only.
@@ -517,7 +552,14 @@ fn process_cpu_seconds() -> Option<f64> {
 fn track_cmd(a: &TrackArgs) -> Result<(), rank3::Error> {
     // Fail on a bad output extension before the (long) tracking.
     rank3::tracks::Format::from_path(&a.out)?;
-    let (table, _) = track_input(&a.input, &a.opts)?;
+    #[cfg(feature = "rerun")]
+    let recording = a.record.open("rank3")?;
+    let tracked = track_input(&a.input, &a.opts)?;
+    #[cfg(feature = "rerun")]
+    if let Some(rec) = &recording {
+        record_tracking(rec, &a.input, &tracked, true)?;
+    }
+    let table = tracked.table;
     table.write(&a.out)?;
     println!(
         "wrote {} ({} frames × {} tracks, {} observations, {:.1} % filled)",
@@ -553,7 +595,15 @@ impl rank3::Observer for SpinnerObserver {
 
 fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
     std::fs::create_dir_all(&a.out).map_err(|e| rank3::Error::io(&a.out, e))?;
-    let (mut table, _) = track_input(&a.input, &a.opts)?;
+    #[cfg(feature = "rerun")]
+    let recording = a.record.open("rank3")?;
+    let tracked = track_input(&a.input, &a.opts)?;
+    #[cfg(feature = "rerun")]
+    if let Some(rec) = &recording {
+        // The table goes in with the reconstruction (reconstruct_recorded logs it).
+        record_tracking(rec, &a.input, &tracked, false)?;
+    }
+    let mut table = tracked.table;
     let tracks = a.out.join("tracks.csv");
     table.write(&tracks)?;
     eprintln!(
@@ -579,6 +629,11 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
     let spinner = indicatif::ProgressBar::new_spinner()
         .with_style(bar_style("reconstructing {spinner} {elapsed} {msg}"));
     let mut obs = SpinnerObserver(spinner.clone());
+    #[cfg(feature = "rerun")]
+    let rec =
+        rank3::recording::reconstruct_recorded_with(recording.as_ref(), &table, &config, &mut obs)
+            .map_err(rank3::Error::from);
+    #[cfg(not(feature = "rerun"))]
     let rec = Reconstruction::from_tracks_observed(&table, &config, &mut obs);
     spinner.finish_and_clear();
     let rec = rec?;

@@ -47,3 +47,36 @@ impl<T: Observer + ?Sized> Observer for &mut T {
         (**self).on_event(event)
     }
 }
+
+/// Forwards every event to two observers in turn (a recording and a progress bar, say).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Both<A, B>(pub A, pub B);
+
+impl<A: Observer, B: Observer> Observer for Both<A, B> {
+    fn on_event(&mut self, event: &Event<'_>) {
+        self.0.on_event(event);
+        self.1.on_event(event);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Default)]
+    struct Count(usize);
+    impl Observer for Count {
+        fn on_event(&mut self, _: &Event<'_>) {
+            self.0 += 1;
+        }
+    }
+
+    #[test]
+    fn both_forwards_to_each() {
+        let (mut a, mut b) = (Count::default(), Count::default());
+        let mut both = Both(&mut a, &mut b);
+        both.on_event(&Event::Warning { message: "x" });
+        both.on_event(&Event::StageStarted { stage: "input" });
+        assert_eq!((a.0, b.0), (2, 2));
+    }
+}

@@ -23,6 +23,8 @@
 //! | path | archetype | what |
 //! |---|---|---|
 //! | `image/tracks` | Points2D per frame | observed positions, class id = track index |
+//! | `image/frame` | EncodedImage (JPEG) per frame | the frames `rank3 track` / `run` tracked on |
+//! | `tracking/{tracked,new,alive}`, `tracking/lost/<reason>` | Scalars per frame | tracker counts |
 //! | `image/trajectories` | LineStrips2D | one strip per input track; from stage `robust` on coloured green (inlier) / red (outlier) |
 //! | `image/set_aside/{points,trajectories}` | Points2D / LineStrips2D | set-aside tracks, red |
 //! | `image/residuals` | Arrows2D per frame | observed → predicted (metric model) |
@@ -103,6 +105,10 @@ pub const TIMELINE_ITERATION: &str = "iteration";
 /// Entity paths used by this module.
 pub mod paths {
     pub const TRACKS: &str = "image/tracks";
+    /// The video frames a tracker saw (JPEG-encoded), under the tracks.
+    pub const FRAME_IMAGE: &str = "image/frame";
+    /// Per-frame tracker counts: `tracking/{tracked,new,alive}` and `tracking/lost/<reason>`.
+    pub const TRACKING: &str = "tracking";
     pub const TRAJECTORIES: &str = "image/trajectories";
     pub const SET_ASIDE_POINTS: &str = "image/set_aside/points";
     pub const SET_ASIDE_TRAJECTORIES: &str = "image/set_aside/trajectories";
@@ -266,12 +272,25 @@ pub fn reconstruct_recorded(
     table: &TrackTable,
     config: &Config,
 ) -> RecordingResult<Reconstruction> {
+    reconstruct_recorded_with(rec, table, config, &mut crate::NoopObserver)
+}
+
+/// [`reconstruct_recorded`] with every pipeline event also sent to `extra` (a progress
+/// bar, say).
+pub fn reconstruct_recorded_with(
+    rec: Option<&RecordingStream>,
+    table: &TrackTable,
+    config: &Config,
+    extra: &mut dyn Observer,
+) -> RecordingResult<Reconstruction> {
     let Some(rec) = rec else {
-        return Ok(Reconstruction::from_tracks(table, config)?);
+        return Ok(Reconstruction::from_tracks_observed(table, config, extra)?);
     };
     log_input(rec, table)?;
     let mut observer = RecordingObserver::new(rec);
-    match Reconstruction::from_tracks_observed(table, config, &mut observer) {
+    let result =
+        Reconstruction::from_tracks_observed(table, config, &mut crate::Both(&mut observer, extra));
+    match result {
         Ok(mut result) => {
             if let (n @ 1.., Some(first)) = observer.errors() {
                 result
@@ -1199,6 +1218,73 @@ pub fn log_robust(
         rec.log(paths::ROBUST_INLIER_COUNT, &Scalars::single(count as f64))?;
     }
     rec.disable_timeline(TIMELINE_ITERATION);
+    Ok(())
+}
+
+/// Logs a frame the tracker saw on `image/frame` as a JPEG (`quality` 1–100) at `frame`
+/// timeline value `index`, stage `input`, beneath the tracks of [`log_input`]. The image
+/// is encoded here (about 5 ms for 640×480), so a recording holds tens of kilobytes per
+/// frame instead of the raw pixels.
+///
+/// Cost: O(width·height).
+pub fn log_frame(
+    rec: &RecordingStream,
+    index: usize,
+    image: &crate::track::GrayImage,
+    quality: u8,
+) -> RecordingResult {
+    let (w, h) = (image.width, image.height);
+    let pixels: Vec<u8> = image
+        .data
+        .iter()
+        .map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+        .collect();
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, quality.clamp(1, 100))
+        .encode(&pixels, w as u32, h as u32, image::ExtendedColorType::L8)
+        .map_err(|e| Error::Image {
+            path: PathBuf::from(format!("frame {index}")),
+            message: format!("cannot encode the frame as JPEG for the recording: {e}"),
+        })?;
+    rec.set_time_sequence(TIMELINE_STAGE, 0);
+    rec.set_time_sequence(TIMELINE_FRAME, index as i64);
+    rec.log(
+        paths::FRAME_IMAGE,
+        &rerun::EncodedImage::from_file_contents(jpeg).with_draw_order(-10.0),
+    )?;
+    rec.disable_timeline(TIMELINE_FRAME);
+    Ok(())
+}
+
+/// Logs the tracker's per-frame counts as Scalars on the `frame` timeline (stage `input`):
+/// `tracking/tracked`, `tracking/new`, `tracking/alive` and `tracking/lost/<reason>` for
+/// the reasons out_of_image, low_texture, residual and forward_backward.
+///
+/// Cost: O(F).
+pub fn log_tracking(rec: &RecordingStream, stats: &[crate::track::FrameStats]) -> RecordingResult {
+    let frames: Vec<usize> = stats.iter().map(|s| s.frame).collect();
+    type Count = fn(&crate::track::FrameStats) -> usize;
+    let series: [(&str, Count); 7] = [
+        ("tracked", |s| s.tracked),
+        ("new", |s| s.new),
+        ("alive", |s| s.alive),
+        ("lost/out_of_image", |s| s.lost_out_of_image),
+        ("lost/low_texture", |s| s.lost_low_texture),
+        ("lost/residual", |s| s.lost_residual),
+        ("lost/forward_backward", |s| s.lost_forward_backward),
+    ];
+    for (name, count) in series {
+        let column = Scalars::update_fields()
+            .with_scalars(stats.iter().map(|s| count(s) as f64))
+            .columns_of_unit_batches()?;
+        send_per_frame(
+            rec,
+            &format!("{}/{name}", paths::TRACKING),
+            "input",
+            &frames,
+            column.collect(),
+        )?;
+    }
     Ok(())
 }
 

@@ -474,3 +474,68 @@ fn rerun_viewer_verifies_the_recording() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `rank3 track --rrd` records the frames it tracked on (JPEG), the tracker's per-frame
+/// counts and the resulting tracks.
+#[test]
+fn cli_track_records_frames_counts_and_tracks() {
+    use rank3::track::synthetic::{Motion, Sequence, SequenceConfig};
+    let dir = std::env::temp_dir().join(format!("rank3-recording-track-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let frames_dir = dir.join("frames");
+    std::fs::create_dir_all(&frames_dir).unwrap();
+    let nf = 6;
+    let seq = Sequence::new(SequenceConfig {
+        width: 160,
+        height: 120,
+        frames: nf,
+        motion: Motion {
+            translation: [1.5, 0.5],
+            ..Motion::default()
+        },
+        ..SequenceConfig::default()
+    });
+    for k in 0..nf {
+        seq.render(k)
+            .save_png(&frames_dir.join(format!("f{k}.png")))
+            .unwrap();
+    }
+    let rrd = dir.join("track.rrd");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
+        .arg("track")
+        .arg(&frames_dir)
+        .arg("--out")
+        .arg(dir.join("tracks.csv"))
+        .arg("--rrd")
+        .arg(&rrd)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let table = rank3::TrackTable::read(dir.join("tracks.csv")).unwrap();
+    assert!(table.n_tracks() > 10, "{} tracks", table.n_tracks());
+    let c = read_rrd(&rrd);
+    let frames = c.get(paths::FRAME_IMAGE, "EncodedImage:blob");
+    assert_eq!(frames.rows(), nf);
+    assert_eq!(frames.times["frame"], (0..nf as i64).collect::<Vec<_>>());
+    let alive = c.get(&format!("{}/alive", paths::TRACKING), "Scalars:scalars");
+    assert_eq!(alive.rows(), nf);
+    assert_eq!(
+        c.get(
+            &format!("{}/lost/forward_backward", paths::TRACKING),
+            "Scalars:scalars"
+        )
+        .rows(),
+        nf
+    );
+    let tracks = c.get(paths::TRACKS, "Points2D:positions");
+    assert_eq!((tracks.rows(), tracks.total()), (nf, table.n_observed()));
+    assert_eq!(
+        c.get(paths::TRAJECTORIES, "LineStrips2D:strips").total(),
+        table.n_tracks()
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
