@@ -153,7 +153,8 @@ pub enum Init {
     Random,
     /// Data-driven first run: missing entries filled with their row's observed mean, `t` =
     /// those row means (affine), `M` = the leading `r` left singular vectors of the filled
-    /// (affine: row-centred) matrix. Further runs (`runs > 1`) start at random.
+    /// (affine: row-centred) matrix, refined by `impute_iterations` hard-impute sweeps
+    /// ([`CompletionProblem::auto_start`]). Further runs (`runs > 1`) start at random.
     #[default]
     Auto,
 }
@@ -219,6 +220,15 @@ pub struct CompletionConfig {
     pub creep_window: usize,
     /// See `creep_window`. Default 1e-3.
     pub creep_tolerance: f64,
+    /// [`Init::Auto`]: hard-impute (EM) sweeps refining the data-driven start before the
+    /// solver runs: the missing entries are replaced by the current rank-`r` (+ translation)
+    /// reconstruction and the subspace is re-estimated (Troyanskaya et al. 2001;
+    /// Mazumder, Hastie & Tibshirani 2010 without shrinkage). 0 keeps the plain row-mean
+    /// start. Default 10: with the plain start the affine Wiberg run ends in a spurious
+    /// minimum on dino_trimmed (RMS 4.088 after 500 iterations) and on the hotel tracks
+    /// with 70 % hidden; 3 sweeps fix dino only, 5–30 fix both (measured; 200 sweeps drift
+    /// into a poor basin again on the hotel case).
+    pub impute_iterations: usize,
 }
 
 impl Default for CompletionConfig {
@@ -243,6 +253,7 @@ impl Default for CompletionConfig {
             jacobian: VarProJacobian::Kaufman,
             creep_window: 20,
             creep_tolerance: 1e-3,
+            impute_iterations: 10,
         }
     }
 }
@@ -873,8 +884,16 @@ impl CompletionProblem {
 
     /// Data-driven start: fill missing entries with the row's observed mean, take
     /// `t` = row means (affine; zero for the free model) and `M` = leading `r` left singular
-    /// vectors of the filled (affine: centred) matrix. Dense `O(F N min(F, N))`, once.
-    pub fn auto_start(&self) -> Result<(Mat<f64>, Vec<f64>)> {
+    /// vectors of the filled (affine: centred) matrix; then `impute_iterations` hard-impute
+    /// sweeps: missing entries ← `M Σ Vᵀ (+ t 1ᵀ)` of the current rank-`r` SVD, `t` ← row
+    /// means of the filled matrix, SVD again. Each sweep is an EM step for a rank-`r`
+    /// model with missing data: it never increases the fit to the filled matrix and, unlike
+    /// the row means, it does not bias the start toward the frames' visible subsets (which
+    /// shift with the camera when tracks enter and leave).
+    ///
+    /// Dense: `O(F N r)` per sweep with the randomized truncated SVD ([`crate::svd`]),
+    /// `impute_iterations + 1` SVDs in all, once per completion.
+    pub fn auto_start(&self, impute_iterations: usize) -> Result<(Mat<f64>, Vec<f64>)> {
         let rows = 2 * self.n_frames;
         let mut mean = vec![0.0; rows];
         for f in 0..self.n_frames {
@@ -901,13 +920,42 @@ impl CompletionProblem {
                 }
             }
         }
-        let svd = a.thin_svd().map_err(|e| Error::Numerical {
-            stage: "completion auto init",
-            message: format!("SVD failed: {e:?}"),
-        })?;
-        let m = Mat::from_fn(rows, self.rank, |i, c| svd.U()[(i, c)]);
-        let t = if self.affine { mean } else { vec![0.0; rows] };
-        Ok((m, t))
+        let r = self.rank;
+        let svd_cfg = crate::svd::TruncatedSvdConfig::default();
+        let mut sweep = 0;
+        loop {
+            let svd = crate::svd::truncated_svd(a.as_ref(), r, &svd_cfg)?;
+            let k = svd.s.len().min(r);
+            if sweep >= impute_iterations {
+                let m = Mat::from_fn(rows, r, |i, c| if c < k { svd.u[(i, c)] } else { 0.0 });
+                let t = if self.affine { mean } else { vec![0.0; rows] };
+                return Ok((m, t));
+            }
+            sweep += 1;
+            // a ← rank-r reconstruction (+ t) with the observed entries put back.
+            let (u, sv, v) = (&svd.u, &svd.s, &svd.v);
+            a = Mat::from_fn(rows, self.n_points, |i, p| {
+                let shift = if self.affine { mean[i] } else { 0.0 };
+                shift + (0..k).map(|c| u[(i, c)] * sv[c] * v[(p, c)]).sum::<f64>()
+            });
+            for f in 0..self.n_frames {
+                for o in self.row_ptr[f]..self.row_ptr[f + 1] {
+                    let p = self.row_track[o];
+                    for c in 0..2 {
+                        a[(2 * f + c, p)] = self.row_w[o][c];
+                    }
+                }
+            }
+            if self.affine {
+                for (i, mi) in mean.iter_mut().enumerate() {
+                    *mi = (0..self.n_points).map(|p| a[(i, p)]).sum::<f64>()
+                        / self.n_points.max(1) as f64;
+                    for p in 0..self.n_points {
+                        a[(i, p)] -= *mi;
+                    }
+                }
+            }
+        }
     }
 
     /// Points (r×N) and translation in the output gauge (affine: centred points).
@@ -991,7 +1039,7 @@ pub fn complete(
     for run in 0..cfg.runs {
         let start = Instant::now();
         let (m0, t0) = match (cfg.init, run) {
-            (Init::Auto, 0) => problem.auto_start()?,
+            (Init::Auto, 0) => problem.auto_start(cfg.impute_iterations)?,
             _ => {
                 let mut rng = StdRng::seed_from_u64(run_seed(cfg.seed, run));
                 problem.random_start(&mut rng)
