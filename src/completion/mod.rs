@@ -920,13 +920,25 @@ impl CompletionProblem {
                 }
             }
         }
+        self.impute(a, mean, impute_iterations)
+    }
+
+    /// `sweeps` hard-impute sweeps on the filled matrix `a` (affine: centred, with row
+    /// means `mean`), then `M` = its leading left singular vectors, `t` = `mean`.
+    fn impute(
+        &self,
+        mut a: Mat<f64>,
+        mut mean: Vec<f64>,
+        sweeps: usize,
+    ) -> Result<(Mat<f64>, Vec<f64>)> {
+        let rows = 2 * self.n_frames;
         let r = self.rank;
         let svd_cfg = crate::svd::TruncatedSvdConfig::default();
         let mut sweep = 0;
         loop {
             let svd = crate::svd::truncated_svd(a.as_ref(), r, &svd_cfg)?;
             let k = svd.s.len().min(r);
-            if sweep >= impute_iterations {
+            if sweep >= sweeps {
                 let m = Mat::from_fn(rows, r, |i, c| if c < k { svd.u[(i, c)] } else { 0.0 });
                 let t = if self.affine { mean } else { vec![0.0; rows] };
                 return Ok((m, t));
