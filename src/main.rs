@@ -549,16 +549,42 @@ fn process_cpu_seconds() -> Option<f64> {
     Some((ticks(11)? + ticks(12)?) / 100.0)
 }
 
+/// The recording a command writes to (none without the `rerun` feature).
+#[cfg(feature = "rerun")]
+type Recording = Option<rerun::RecordingStream>;
+#[cfg(not(feature = "rerun"))]
+type Recording = ();
+
+/// Opens the requested recording, tracks `input` and records the tracking (the table too
+/// when `log_table`).
+fn track_recorded(
+    input: &Path,
+    opts: &TrackOpts,
+    #[cfg(feature = "rerun")] record: &rank3::recording::RecordingArgs,
+    #[cfg_attr(not(feature = "rerun"), allow(unused_variables))] log_table: bool,
+) -> Result<(Tracked, Recording), rank3::Error> {
+    #[cfg(feature = "rerun")]
+    let recording = record.open("rank3")?;
+    #[cfg(not(feature = "rerun"))]
+    let recording = ();
+    let tracked = track_input(input, opts)?;
+    #[cfg(feature = "rerun")]
+    if let Some(rec) = &recording {
+        record_tracking(rec, input, &tracked, log_table)?;
+    }
+    Ok((tracked, recording))
+}
+
 fn track_cmd(a: &TrackArgs) -> Result<(), rank3::Error> {
     // Fail on a bad output extension before the (long) tracking.
     rank3::tracks::Format::from_path(&a.out)?;
-    #[cfg(feature = "rerun")]
-    let recording = a.record.open("rank3")?;
-    let tracked = track_input(&a.input, &a.opts)?;
-    #[cfg(feature = "rerun")]
-    if let Some(rec) = &recording {
-        record_tracking(rec, &a.input, &tracked, true)?;
-    }
+    let (tracked, _recording) = track_recorded(
+        &a.input,
+        &a.opts,
+        #[cfg(feature = "rerun")]
+        &a.record,
+        true,
+    )?;
     let table = tracked.table;
     table.write(&a.out)?;
     println!(
@@ -595,14 +621,15 @@ impl rank3::Observer for SpinnerObserver {
 
 fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
     std::fs::create_dir_all(&a.out).map_err(|e| rank3::Error::io(&a.out, e))?;
-    #[cfg(feature = "rerun")]
-    let recording = a.record.open("rank3")?;
-    let tracked = track_input(&a.input, &a.opts)?;
-    #[cfg(feature = "rerun")]
-    if let Some(rec) = &recording {
-        // The table goes in with the reconstruction (reconstruct_recorded logs it).
-        record_tracking(rec, &a.input, &tracked, false)?;
-    }
+    // The table goes in with the reconstruction (reconstruct_recorded logs it).
+    #[cfg_attr(not(feature = "rerun"), allow(unused_variables))]
+    let (tracked, recording) = track_recorded(
+        &a.input,
+        &a.opts,
+        #[cfg(feature = "rerun")]
+        &a.record,
+        false,
+    )?;
     let mut table = tracked.table;
     let tracks = a.out.join("tracks.csv");
     table.write(&tracks)?;

@@ -364,21 +364,24 @@ fn summary_names_the_choices() {
     assert!(md.contains("set aside"));
 }
 
+/// Runs the `rank3` binary and asserts that it succeeded.
+fn rank3_ok<S: AsRef<std::ffi::OsStr>>(args: impl IntoIterator<Item = S>) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 #[test]
 fn cli_rrd_flag_records_synth_and_reconstruct() {
     let dir = std::env::temp_dir().join(format!("rank3-recording-cli-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let run = |args: &[&str]| {
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
+    let run = |args: &[&str]| rank3_ok(args);
     let d = dir.to_str().unwrap();
     run(&[
         "synth",
@@ -501,20 +504,14 @@ fn cli_track_records_frames_counts_and_tracks() {
             .unwrap();
     }
     let rrd = dir.join("track.rrd");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
-        .arg("track")
-        .arg(&frames_dir)
-        .arg("--out")
-        .arg(dir.join("tracks.csv"))
-        .arg("--rrd")
-        .arg(&rrd)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    rank3_ok([
+        "track".as_ref(),
+        frames_dir.as_os_str(),
+        "--out".as_ref(),
+        dir.join("tracks.csv").as_os_str(),
+        "--rrd".as_ref(),
+        rrd.as_os_str(),
+    ]);
     let table = rank3::TrackTable::read(dir.join("tracks.csv")).unwrap();
     assert!(table.n_tracks() > 10, "{} tracks", table.n_tracks());
     let c = read_rrd(&rrd);
