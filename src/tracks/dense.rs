@@ -301,15 +301,7 @@ mod tests {
     }
 
     fn err(txt: &str) -> (usize, String, String) {
-        match parse(txt, p()).unwrap_err() {
-            Error::Parse {
-                line,
-                field,
-                message,
-                ..
-            } => (line, field, message),
-            e => panic!("unexpected {e}"),
-        }
+        crate::tracks::parse_error_parts(parse(txt, p()).unwrap_err())
     }
 
     #[test]

@@ -545,3 +545,17 @@ mod tests {
         assert_eq!(TrackTable::from_measurements(&m), t);
     }
 }
+
+/// Test helper: the line, field and message of an [`Error::Parse`] (panics on any other).
+#[cfg(test)]
+pub(crate) fn parse_error_parts(e: Error) -> (usize, String, String) {
+    match e {
+        Error::Parse {
+            line,
+            field,
+            message,
+            ..
+        } => (line, field, message),
+        e => panic!("unexpected {e}"),
+    }
+}
