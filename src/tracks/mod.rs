@@ -473,6 +473,20 @@ pub(crate) fn order_ids(ids: &mut [Id]) {
     }
 }
 
+/// Test helper: the line, field and message of an [`Error::Parse`] (panics on any other).
+#[cfg(test)]
+pub(crate) fn parse_error_parts(e: Error) -> (usize, String, String) {
+    match e {
+        Error::Parse {
+            line,
+            field,
+            message,
+            ..
+        } => (line, field, message),
+        e => panic!("unexpected {e}"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -543,19 +557,5 @@ mod tests {
         assert_eq!(m.w[(3, 1)], 1.0);
         assert!(!m.is_visible(0, 1));
         assert_eq!(TrackTable::from_measurements(&m), t);
-    }
-}
-
-/// Test helper: the line, field and message of an [`Error::Parse`] (panics on any other).
-#[cfg(test)]
-pub(crate) fn parse_error_parts(e: Error) -> (usize, String, String) {
-    match e {
-        Error::Parse {
-            line,
-            field,
-            message,
-            ..
-        } => (line, field, message),
-        e => panic!("unexpected {e}"),
     }
 }
