@@ -72,17 +72,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let base = TrackerConfig::default();
         let mut no_fb = base.clone();
         no_fb.klt.fb_threshold = None;
-        let mut lenient = base.clone();
-        lenient.klt.border_margin = Some(1.0);
-        let mut lenient_no_fb = lenient.clone();
-        lenient_no_fb.klt.fb_threshold = None;
+        let mut inside = base.clone();
+        inside.klt.border_margin = Some(base.klt.half() as f32);
+        let mut low_tex = base.clone();
+        low_tex.klt.min_eigenvalue = 1e-5;
+        let mut low_tex_no_fb = low_tex.clone();
+        low_tex_no_fb.klt.fb_threshold = None;
         let mut w15 = base.clone();
         w15.klt.window = 15;
         vec![
-            ("default (w 21, L 3, FB 1 px, margin = half window)", base),
+            ("default (w 21, L 3, FB 1 px, point inside the image)", base),
             ("no FB check", no_fb),
-            ("border margin 1 px", lenient),
-            ("border margin 1 px, no FB", lenient_no_fb),
+            ("whole window inside (margin = half window)", inside),
+            ("min eigenvalue 1e-5", low_tex),
+            ("min eigenvalue 1e-5, no FB", low_tex_no_fb),
             ("window 15", w15),
         ]
     };

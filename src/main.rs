@@ -388,7 +388,8 @@ struct TrackOpts {
     /// Low-texture threshold: minimum eigenvalue of the gradient matrix / window area.
     #[arg(long, default_value_t = 1e-4)]
     min_eigenvalue: f32,
-    /// Lose points closer than this to the border, pixels (default: half the window).
+    /// Lose points closer than this to the border, pixels (default 0: a point is lost when
+    /// it leaves the image; its window may cross the border).
     #[arg(long)]
     border_margin: Option<f32>,
 }

@@ -156,7 +156,7 @@ fn points_leaving_the_frame_end() {
     let table = run(&s, small_cfg(), None);
     let score = s.score(&table, 2.0);
     assert!(score.wrong_fraction() < 0.05, "{score:?}");
-    let margin = 5.0; // half window of 11
+    let edge = 5.0; // half window of 11
     let w = s.cfg.width as f64;
     let mut ended_at_edge = 0;
     for p in 0..table.n_tracks() {
@@ -171,7 +171,7 @@ fn points_leaving_the_frame_end() {
         );
         for &f in &frames {
             let [x, _] = table.get(f, p).unwrap();
-            assert!(x >= margin && x <= w - 1.0 - margin, "x = {x} in frame {f}");
+            assert!(x >= 0.0 && x <= w - 1.0, "x = {x} in frame {f}");
         }
         let last = *frames.last().unwrap();
         if last + 1 < table.n_frames() {
@@ -179,7 +179,7 @@ fn points_leaving_the_frame_end() {
             let first = table.get(frames[0], p).unwrap();
             let sc = s.to_scene(frames[0], first);
             let nx = s.to_image(last + 1, sc)[0];
-            if nx > w - 1.0 - margin - 1.0 {
+            if nx > w - 1.0 - edge - 1.0 {
                 ended_at_edge += 1;
             }
         }

@@ -20,7 +20,12 @@
 // Negated comparisons are deliberate: they also reject NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+use rayon::prelude::*;
+
 use super::pyramid::Level;
+
+/// Rows per parallel task of the response computation (rayon).
+const ROWS: usize = 32;
 use crate::{Error, Result};
 
 /// Corner detector settings.
@@ -87,7 +92,7 @@ pub struct Corner {
 
 /// The minimum-eigenvalue response of every pixel (zero on the outer `block/2` ring).
 /// Box sums are separable: vertical sums of the tensor products row by row, then horizontal
-/// sums of shifted rows (branch-free, vectorizable).
+/// sums of shifted rows (branch-free, vectorizable), in parallel blocks of rows.
 pub fn min_eigen_response(level: &Level, block: usize) -> Vec<f32> {
     let (w, h) = (level.w, level.h);
     let r = block / 2;
@@ -97,39 +102,46 @@ pub fn min_eigen_response(level: &Level, block: usize) -> Vec<f32> {
     }
     let n = w - 2 * r;
     let norm = 1.0 / (block * block) as f32;
-    let (mut vxx, mut vxy, mut vyy) = (vec![0f32; w], vec![0f32; w], vec![0f32; w]);
-    let (mut a, mut b, mut c) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
-    for y in r..h - r {
-        vxx.fill(0.0);
-        vxy.fill(0.0);
-        vyy.fill(0.0);
-        for yy in y - r..=y + r {
-            let gx = &level.gx[yy * w..yy * w + w];
-            let gy = &level.gy[yy * w..yy * w + w];
-            for x in 0..w {
-                vxx[x] += gx[x] * gx[x];
-                vxy[x] += gx[x] * gy[x];
-                vyy[x] += gy[x] * gy[x];
+    // Rows r..h−r in parallel blocks, each with its own running sums.
+    out[r * w..(h - r) * w]
+        .par_chunks_mut(w * ROWS)
+        .enumerate()
+        .for_each(|(blk, rows)| {
+            let (mut vxx, mut vxy, mut vyy) = (vec![0f32; w], vec![0f32; w], vec![0f32; w]);
+            let (mut a, mut b, mut c) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+            for (k, row) in rows.chunks_exact_mut(w).enumerate() {
+                let y = r + blk * ROWS + k;
+                vxx.fill(0.0);
+                vxy.fill(0.0);
+                vyy.fill(0.0);
+                for yy in y - r..=y + r {
+                    let gx = &level.gx[yy * w..yy * w + w];
+                    let gy = &level.gy[yy * w..yy * w + w];
+                    for x in 0..w {
+                        vxx[x] += gx[x] * gx[x];
+                        vxy[x] += gx[x] * gy[x];
+                        vyy[x] += gy[x] * gy[x];
+                    }
+                }
+                let dst = &mut row[r..r + n];
+                a.fill(0.0);
+                b.fill(0.0);
+                c.fill(0.0);
+                for k in 0..block {
+                    let (sx, sxy, sy) = (&vxx[k..k + n], &vxy[k..k + n], &vyy[k..k + n]);
+                    for x in 0..n {
+                        a[x] += sx[x];
+                        b[x] += sxy[x];
+                        c[x] += sy[x];
+                    }
+                }
+                for x in 0..n {
+                    let (a, b, c) = (a[x] * norm, b[x] * norm, c[x] * norm);
+                    let half = 0.5 * (a - c);
+                    dst[x] = 0.5 * (a + c) - (half * half + b * b).sqrt();
+                }
             }
-        }
-        let dst = &mut out[y * w + r..y * w + r + n];
-        a.fill(0.0);
-        b.fill(0.0);
-        c.fill(0.0);
-        for k in 0..block {
-            let (sx, sxy, sy) = (&vxx[k..k + n], &vxy[k..k + n], &vyy[k..k + n]);
-            for x in 0..n {
-                a[x] += sx[x];
-                b[x] += sxy[x];
-                c[x] += sy[x];
-            }
-        }
-        for x in 0..n {
-            let (a, b, c) = (a[x] * norm, b[x] * norm, c[x] * norm);
-            let half = 0.5 * (a - c);
-            dst[x] = 0.5 * (a + c) - (half * half + b * b).sqrt();
-        }
-    }
+        });
     out
 }
 
@@ -198,9 +210,6 @@ pub fn detect_corners_filtered(
         let (x, y) = ((i as usize % w) as f32, (i as usize / w) as f32);
         let (cx, cy) = ((x / cell) as usize, (y / cell) as usize);
         let mut ok = true;
-        if !keep(i as usize % w, i as usize / w) {
-            continue;
-        }
         if md > 0.0 {
             'outer: for gy in cy.saturating_sub(1)..=(cy + 1).min(gh - 1) {
                 for gx in cx.saturating_sub(1)..=(cx + 1).min(gw - 1) {
@@ -213,7 +222,9 @@ pub fn detect_corners_filtered(
                 }
             }
         }
-        if ok {
+        // The acceptance test after the (cheaper) spacing test: same result, as a corner
+        // failing either is dropped and only accepted corners enter the grid.
+        if ok && keep(i as usize % w, i as usize / w) {
             grid[cy * gw + cx].push((x, y));
             out.push(Corner { x, y, response: v });
             if out.len() == cfg.max_features {

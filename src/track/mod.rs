@@ -198,7 +198,7 @@ impl Tracker {
         self.cfg
             .detect
             .border
-            .unwrap_or(self.cfg.klt.margin().ceil() as usize + 1)
+            .unwrap_or((self.cfg.klt.margin().ceil() as usize).max(self.cfg.klt.half()) + 1)
     }
 
     /// Adds the next frame: tracks live points into it, then re-detects if needed.
@@ -236,7 +236,12 @@ impl Tracker {
                 p.rebuild(image, self.pyramid_levels(), min_side);
                 p
             }
-            None => Pyramid::new(image, self.pyramid_levels(), min_side),
+            None => Pyramid::with_padding(
+                image,
+                self.pyramid_levels(),
+                min_side,
+                klt::padding_for_window(self.cfg.klt.window),
+            ),
         };
         let mut stats = FrameStats {
             frame: f,
@@ -436,6 +441,8 @@ pub fn read_init_points(path: &Path) -> Result<Vec<[f64; 2]>> {
 
 /// Tracks a whole frame source. `init_points` switch to following those points (no
 /// re-detection unless `cfg.redetect_with_points`). `progress` is called after every frame.
+/// Frames are decoded one ahead on a scoped reader thread (at most two waiting), so decoding
+/// overlaps tracking.
 pub fn track_source(
     source: &mut FrameSource,
     cfg: &TrackerConfig,
@@ -446,13 +453,46 @@ pub fn track_source(
         Some(p) => Tracker::with_points(cfg.clone(), p)?,
         None => Tracker::new(cfg.clone())?,
     };
-    while let Some((id, img)) = source.next_frame()? {
-        let s = tracker.push(id, &img)?;
-        progress(&s);
-    }
+    let path = source.path().to_path_buf();
+    // Decode ahead: the next frame is read on another thread while this one is tracked.
+    std::thread::scope(|scope| -> Result<()> {
+        let (tx, rx) = std::sync::mpsc::sync_channel(2);
+        let reader = scope.spawn(move || {
+            loop {
+                let item = source.next_frame();
+                let stop = !matches!(item, Ok(Some(_)));
+                if tx.send(item).is_err() || stop {
+                    break;
+                }
+            }
+        });
+        let mut out = Ok(());
+        for item in rx.iter() {
+            match item {
+                Ok(Some((id, img))) => match tracker.push(id, &img) {
+                    Ok(s) => progress(&s),
+                    Err(e) => {
+                        out = Err(e);
+                        break;
+                    }
+                },
+                Ok(None) => break,
+                Err(e) => {
+                    out = Err(e);
+                    break;
+                }
+            }
+        }
+        // Dropping the receiver stops the reader at its next send.
+        drop(rx);
+        if let Err(panic) = reader.join() {
+            std::panic::resume_unwind(panic);
+        }
+        out
+    })?;
     if tracker.frame_ids.is_empty() {
         return Err(Error::Image {
-            path: source.path().to_path_buf(),
+            path,
             message: "no frames".into(),
         });
     }
