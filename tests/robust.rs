@@ -183,6 +183,12 @@ fn gross_entries_are_flagged() {
             (0.95, 0.95)
         };
         assert!(p >= min_p && rc >= min_r, "track P {p:.3} R {rc:.3}");
+        // The flag → refit loop converges before its cap.
+        assert!(
+            r.gross_rounds < RobustConfig::default().max_gross_rounds,
+            "missing {missing}: {} refits",
+            r.gross_rounds
+        );
     }
 }
 

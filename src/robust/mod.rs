@@ -20,12 +20,19 @@
 //!    farther than `entry_threshold_px` (default `sqrt(χ²₂(entry_probability)) · σ_e`,
 //!    4.29 σ_e for p = 0.9999) from their track's fit are flagged (each track is refitted on
 //!    its entries within the threshold; when more than `max_flagged_fraction` would be
-//!    flagged, a per-track RANSAC over frame pairs looks for a better start). A track is an
-//!    inlier when its unflagged RMS `r` over `k` frames passes the χ² test
+//!    flagged, a per-track RANSAC over frame pairs looks for a better start; it gives up
+//!    early on tracks where no pair explains half the entries a passing track keeps). A
+//!    track is an inlier when its unflagged RMS `r` over `k` frames passes the χ² test
 //!    `r ≤ σ_e sqrt(χ²_ν(track_probability)/ν)`, `ν = 2k − 3` (or `r ≤ threshold_px` when
 //!    given), and at most `max_flagged_fraction` of its entries are flagged. The model is
-//!    refitted without the flagged entries and this is repeated until the inliers do not
-//!    change and at most 0.1 % of the flags do (none when there are fewer than 1000) (at most `max_gross_rounds`).
+//!    refitted without the flagged entries and this is repeated (at most
+//!    `max_gross_rounds` refits) until it has converged: the inliers are the ones the model
+//!    was fitted to, and the entries whose flag changed since the model was fitted (other
+//!    than those the fit's ALS reweighting set aside anyway, which a refit would set aside
+//!    again) would move no frame's fit by more than 0.02 σ_e (per frame, the sum of their
+//!    distances over the number of entries fitted there). The refit's own
+//!    reweighting already sets aside gross entries, so on typical data the first
+//!    classification is final and no refit is needed.
 //! 4. **Verdict**: a rigid majority exists when the inlier fraction is at least
 //!    `min_inlier_fraction` and no *rival* rigid group (a second RANSAC over the rejected
 //!    tracks, same threshold) has at least `max_rival_ratio` times as many tracks. Otherwise
@@ -42,9 +49,12 @@
 //! each scored on `j̄` tracks of `k` frames before the bail-out test abandons it (`j̄` ≈
 //! 32–64 for hopeless hypotheses, the scale bootstrap on at most `scale_subset` tracks; see
 //! [`ransac`]); with missing data add O(I · N · F/64) for sampling; plus a few
-//! affine refits (O(F·N·3) SVD for complete data, O(#observations) per ALS sweep), plus
-//! the rival search (same order, on the rejected tracks only, and only when they are
-//! numerous enough to matter).
+//! affine refits (O(F·N·3) SVD for complete data, O(#observations) per ALS sweep; the
+//! local-optimization refits on at most `ransac.lo_max_inliers` tracks), plus per
+//! classification round O(#observations) for the track fits and O(32·k) per rejected track
+//! for the per-track frame-pair search (O(k²) for tracks it can rescue), plus the rival
+//! search (same order, on the rejected tracks only, and only when they are numerous enough
+//! to matter).
 
 // `!(x > y)` is used on purpose: it is true for NaN, which must take the safe branch.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -91,7 +101,7 @@ pub struct RobustConfig {
     /// `r ≤ σ sqrt(χ²_ν(track_probability)/ν)`, `ν = 2k − 3` (or `r ≤ threshold_px` when the
     /// RANSAC threshold is given). Default 0.9999.
     pub track_probability: f64,
-    /// Rounds of flag → refit → re-classify. Default 5.
+    /// Refits of the flag → refit → re-classify loop at most. Default 5.
     pub max_gross_rounds: usize,
     /// A track with more than this fraction of its entries flagged is an outlier track.
     /// Default 0.3.
@@ -278,7 +288,8 @@ pub struct RobustResult {
     pub candidate_tracks: Vec<bool>,
     /// Tracks in the best rival group (0 when the search did not run).
     pub rival_tracks: usize,
-    /// Flag/refit rounds run.
+    /// Refits of the flag → refit → re-classify loop (0 when the first classification
+    /// already agreed with the entries the initial refit had set aside).
     pub gross_rounds: usize,
     /// The RANSAC run over the tracks.
     pub ransac: RansacResult<AffineSubspace>,
@@ -396,10 +407,13 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
 
     // Final refit on the RANSAC inliers, then flag → refit → re-classify.
     let mut inl: Vec<usize> = (0..n).filter(|&p| rr.inliers[p]).collect();
-    let mut model = est
-        .refit_with(&ransac_model, &inl, config.subspace.final_als_iterations)
-        .unwrap_or(ransac_model);
-    let mut flagged: Vec<(usize, usize)> = Vec::new();
+    // The current model was fitted to the inliers without the entries `fit_flags` (flagged
+    // before the refit) and `als_excluded` (set aside by the refit's reweighting); sorted.
+    let mut fit_flags: Vec<(usize, usize)> = Vec::new();
+    let (mut model, mut als_excluded) = est
+        .refit_reporting(&ransac_model, &inl, config.subspace.final_als_iterations)
+        .unwrap_or((ransac_model, Vec::new()));
+    let mut flagged: Vec<(usize, usize)>;
     let mut cur = est.clone();
     let mut sigma_e = f64::NAN;
     let mut rounds = 0;
@@ -437,11 +451,16 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             }
             v
         };
-        let trimmed: Vec<Option<[f64; 3]>> = (0..n)
+        // Trimmed fits of all tracks (the start of every entry fit below).
+        let starts: Vec<Option<TrackFit>> = (0..n)
             .into_par_iter()
+            .with_min_len(64)
+            .map(|p| cur.track_fit(&model, p))
+            .collect();
+        let trimmed: Vec<Option<[f64; 3]>> = (0..n)
             .map(|p| {
                 if is_inl[p] {
-                    cur.track_fit(&model, p).map(|f| f.s)
+                    starts[p].map(|f| f.s)
                 } else {
                     None
                 }
@@ -457,7 +476,15 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             .into_par_iter()
             .map(|p| {
                 if is_inl[p] {
-                    entry_fit(&est, &cur, &model, p, thr0, config.max_flagged_fraction).map(|f| f.s)
+                    entry_fit(
+                        &est,
+                        &model,
+                        p,
+                        starts[p].as_ref(),
+                        thr0,
+                        config.max_flagged_fraction,
+                    )
+                    .map(|f| f.s)
                 } else {
                     None
                 }
@@ -474,9 +501,9 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             .map(|p| {
                 entry_fit(
                     &est,
-                    &cur,
                     &model,
                     p,
+                    starts[p].as_ref(),
                     entry_thr,
                     config.max_flagged_fraction,
                 )
@@ -520,20 +547,38 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             new_flags.extend(fit.flagged.iter().map(|&f| (f, p)));
         }
         new_flags.sort_unstable();
-        // Converged when the inliers are unchanged and at most 0.1 % of the flags (rounded
-        // down) changed: refitting without a handful of borderline entries among thousands
-        // moves the model by far less than the noise.
-        let flag_changes = symmetric_difference(&new_flags, &flagged);
-        let changed = new_inl != inl || flag_changes > flagged.len() / 1000;
+        // Converged when the inliers are unchanged and refitting without the new flags
+        // would move no frame's fit by more than `REFIT_SHIFT_TOLERANCE · σ_e`
+        // ([`refit_shift_small`]). That refit would set aside the new flags and (again)
+        // the entries its reweighting rejects, so the entries whose weight would change
+        // are those whose flag changed, less those the reweighting set aside anyway.
+        let toggled: Vec<(usize, usize)> = symmetric_difference(&new_flags, &fit_flags)
+            .into_iter()
+            .filter(|e| als_excluded.binary_search(e).is_err())
+            .collect();
+        let converged = new_inl == inl
+            && refit_shift_small(
+                &est,
+                &model,
+                &fits,
+                &inl,
+                &toggled,
+                entry_thr,
+                REFIT_SHIFT_TOLERANCE * sigma_e,
+            );
         flagged = new_flags;
         inl = new_inl;
-        if !changed || rounds >= config.max_gross_rounds || inl.len() < 4 {
+        if converged || rounds >= config.max_gross_rounds || inl.len() < 4 {
             break (fits, entry_thr);
         }
         rounds += 1;
         cur = TrackSubspace::with_exclusions(meas, &config.subspace, &flagged);
-        if let Some(m) = cur.refit_with(&model, &inl, config.subspace.final_als_iterations) {
+        if let Some((m, excluded)) =
+            cur.refit_reporting(&model, &inl, config.subspace.final_als_iterations)
+        {
             model = m;
+            fit_flags = flagged.clone();
+            als_excluded = excluded;
         }
     };
     let residuals: Vec<Option<f64>> = fits.iter().map(|f| f.as_ref().map(|f| f.rms)).collect();
@@ -691,21 +736,26 @@ fn threshold_refit(
 }
 
 /// Fits track `p` to `model` with its gross entries set aside: start from the trimmed fit
-/// (`cur` excludes the entries flagged so far) and refit on the entries within `thr`
-/// ([`threshold_refit`]). When that leaves more than `max_flagged` of the entries flagged
-/// (the trimmed start was pulled by several gross entries), a per-track RANSAC over frame
-/// pairs (2 frames = 4 equations for the 3 coordinates; pairs `(i, i + k/3)` and
-/// `(i, i + k/2)`, O(k²)) looks for the largest set of consistent entries. `None` when the
-/// track cannot be scored.
+/// `start` (of `cur`, which excludes the entries flagged so far) and refit on the entries
+/// within `thr` ([`threshold_refit`]). When that leaves more than `max_flagged` of the
+/// entries flagged (the trimmed start was pulled by several gross entries), a per-track
+/// RANSAC over frame pairs (2 frames = 4 equations for the 3 coordinates; pairs
+/// `(i, i + k/3)` and `(i, i + k/2)`, `i` in a spread order) looks for the largest set of
+/// consistent entries. The search stops after [`PAIR_PRETEST`] pairs when none of them has
+/// `(1 − max_flagged)·k/2` consistent entries: a track that could pass (at least
+/// `(1 − max_flagged)·k` good entries) has both entries of a pair good with probability
+/// `≥ (1 − max_flagged)²` (0.49), so missing it 32 times in a row has probability
+/// `≤ 0.51³² ≈ 5·10⁻¹⁰`; whole outlier tracks then cost O(32·k) instead of O(k²).
+/// `None` when the track cannot be scored.
 fn entry_fit(
     est: &TrackSubspace,
-    cur: &TrackSubspace,
     model: &AffineSubspace,
     p: usize,
+    start: Option<&TrackFit>,
     thr: f64,
     max_flagged: f64,
 ) -> Option<EntryFit> {
-    let start = cur.track_fit(model, p)?;
+    let start = start?;
     let frames: Vec<u32> = est
         .frames_of(p)
         .iter()
@@ -720,11 +770,27 @@ fn entry_fit(
         return first;
     }
     let mut best: Option<(usize, [f64; 3])> = None;
-    for step in [k / 3, k / 2] {
+    // Visit the first frames of the pairs in the order i_j = j·g mod k (g coprime with k,
+    // near k/φ), so that the first pairs are spread over the track.
+    let g = {
+        let mut g = ((k as f64 * 0.618).round() as usize).max(1);
+        while gcd(g, k) != 1 {
+            g += 1;
+        }
+        g
+    };
+    let useful = ((1.0 - max_flagged) * k as f64 / 2.0).ceil() as usize;
+    let mut tried = 0usize;
+    'search: for step in [k / 3, k / 2] {
         if step == 0 {
             continue;
         }
-        for i in 0..k {
+        for j in 0..k {
+            if tried == PAIR_PRETEST && best.is_none_or(|b| b.0 < useful) {
+                break 'search;
+            }
+            tried += 1;
+            let i = j * g % k;
             let pair = [frames[i], frames[(i + step) % k]];
             if pair[0] == pair[1] {
                 continue;
@@ -755,17 +821,29 @@ fn entry_fit(
     }
 }
 
-/// Size of the symmetric difference of two sorted lists.
-fn symmetric_difference(a: &[(usize, usize)], b: &[(usize, usize)]) -> usize {
-    let (mut i, mut j, mut d) = (0, 0, 0);
+/// Pairs tried by [`entry_fit`]'s per-track RANSAC before it gives up on a track in which
+/// no pair explains half of the entries a passing track must keep.
+const PAIR_PRETEST: usize = 32;
+
+fn gcd(mut a: usize, mut b: usize) -> usize {
+    while b != 0 {
+        (a, b) = (b, a % b);
+    }
+    a
+}
+
+/// Symmetric difference of two sorted lists (sorted).
+fn symmetric_difference(a: &[(usize, usize)], b: &[(usize, usize)]) -> Vec<(usize, usize)> {
+    let (mut i, mut j) = (0, 0);
+    let mut d = Vec::new();
     while i < a.len() && j < b.len() {
         match a[i].cmp(&b[j]) {
             std::cmp::Ordering::Less => {
-                d += 1;
+                d.push(a[i]);
                 i += 1;
             }
             std::cmp::Ordering::Greater => {
-                d += 1;
+                d.push(b[j]);
                 j += 1;
             }
             std::cmp::Ordering::Equal => {
@@ -774,7 +852,52 @@ fn symmetric_difference(a: &[(usize, usize)], b: &[(usize, usize)]) -> usize {
             }
         }
     }
-    d + (a.len() - i) + (b.len() - j)
+    d.extend_from_slice(&a[i..]);
+    d.extend_from_slice(&b[j..]);
+    d
+}
+
+/// Convergence tolerance of the flag → refit loop, in units of `σ_e` (see
+/// [`refit_shift_small`]).
+const REFIT_SHIFT_TOLERANCE: f64 = 0.02;
+
+/// Whether refitting the model after toggling the entries in `toggled` (flagged now but
+/// used by the current fit, or the reverse) would move it by at most `tol` pixels in every
+/// frame. Bound: in the least-squares fit of frame `f`'s motion to its
+/// `n_f` used entries, adding or removing one entry at distance `d_e` from its fit moves
+/// the frame's fit by about `d_e / n_f` (its leverage is of order `1/n_f`), so the test is
+/// `Σ_{e ∈ toggled, frame f} d_e ≤ tol · n_f` for every frame (`d_e` from the track's
+/// current fit; `entry_thr` when the track has none). O(#toggled + Σ_inliers k).
+fn refit_shift_small(
+    est: &TrackSubspace,
+    model: &AffineSubspace,
+    fits: &[Option<EntryFit>],
+    inl: &[usize],
+    toggled: &[(usize, usize)],
+    entry_thr: f64,
+    tol: f64,
+) -> bool {
+    if toggled.is_empty() {
+        return true;
+    }
+    if !(tol > 0.0) {
+        return false;
+    }
+    let nf = model.n_frames;
+    let mut used = vec![0usize; nf];
+    for &p in inl {
+        for &f in est.frames_of(p) {
+            used[f as usize] += 1;
+        }
+    }
+    let mut shift = vec![0.0; nf];
+    for &(f, p) in toggled {
+        shift[f] += match &fits[p] {
+            Some(fit) => est.dist2(model, p, f, &fit.s).sqrt(),
+            None => entry_thr,
+        };
+    }
+    (0..nf).all(|f| shift[f] <= tol * used[f].max(1) as f64)
 }
 
 /// Median (mean of the two middle values for an even count, as [`crate::eval::median`])
@@ -874,6 +997,18 @@ fn no_majority(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn symmetric_difference_of_sorted_lists() {
+        let a = [(0, 1), (0, 3), (2, 0), (5, 5)];
+        let b = [(0, 3), (1, 0), (5, 5), (6, 0)];
+        assert_eq!(
+            symmetric_difference(&a, &b),
+            vec![(0, 1), (1, 0), (2, 0), (6, 0)]
+        );
+        assert!(symmetric_difference(&a, &a).is_empty());
+        assert_eq!(symmetric_difference(&[], &b), b.to_vec());
+    }
 
     #[test]
     fn chi_square_and_normal_quantiles() {

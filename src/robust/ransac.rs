@@ -25,14 +25,19 @@
 //! # Local optimization
 //!
 //! Whenever a hypothesis becomes the best so far, it is refined: `θ ← refit(θ, inliers(θ))`,
-//! re-scored, and kept while the MSAC cost decreases, at most `lo_iterations` times
+//! re-scored, and kept while the MSAC cost decreases (until the inlier set no longer
+//! changes), at most `lo_iterations` times
 //! (the iterated least-squares variant of LO-RANSAC, Chum, Matas & Kittler, DAGM 2003).
 //! A hypothesis that can score only part of the items (e.g. defined on few frames) costs
 //! its unscored items as outliers and may lose to a broad but mediocre model before it is
 //! refined; so a hypothesis whose inlier ratio *among the items it scores* beats the best
 //! model's is locally optimized too, and replaces the best if its refined cost is lower.
 //! Since the number of so-far-the-best hypotheses grows only logarithmically with the
-//! number of draws, LO adds little to the total cost.
+//! number of draws, LO adds little to the total cost. Each refit uses at most
+//! `lo_max_inliers` inliers (the first ones in the run's random item order), as LO-RANSAC's
+//! inner fits use a bounded sample (Lebeda, Matas & Chum, "Fixing the locally optimized
+//! RANSAC", BMVC 2012): the refit's cost is then independent of the number of inliers,
+//! while the re-scoring (and so the acceptance of a refit) still covers all items.
 //!
 //! # Bail-out test
 //!
@@ -54,7 +59,7 @@
 //! `scale_quantile`-quantile of their residuals (least quantile of squares,
 //! Rousseeuw 1984, tolerant of up to `1 − scale_quantile` outliers); from the best one,
 //! `σ = Estimator::sigma_from_residuals(residuals below that quantile)`, then iterated
-//! `σ ← sigma_from_residuals({r_i ≤ κσ})` with a refit on those inliers between steps, where
+//! `σ ← sigma_from_residuals({r_i ≤ κσ})` with a refit on those inliers (at most `lo_max_inliers`) between steps, where
 //! `κ = Estimator::threshold_multiple(inlier_probability)` (for Gaussian residuals a
 //! chi-square quantile). The MSAC run then uses `τ = κσ`; at the end `σ` is re-estimated
 //! from the final inliers and, if `τ` moved, the final model is re-scored (and refitted
@@ -65,7 +70,8 @@
 //! `O(iterations · (fit + j̄ · residual))` with `j̄ ≤ n` the mean number of items scored
 //! before bail-out (≈ 32–64 for hopeless hypotheses; `n` without bail-out), the scale
 //! bootstrap's the same with `min(n, scale_subset)` in place of `n`, plus
-//! `O(#improvements · lo_iterations · (refit + n · residual))` (the full scoring through
+//! `O(#improvements · lo_iterations · (refit(min(inliers, lo_max_inliers)) + n · residual))`
+//! (the full scoring through
 //! [`Estimator::residuals`], which an estimator may parallelize).
 
 use rand::{Rng, RngExt};
@@ -147,6 +153,12 @@ pub struct RansacConfig {
     pub local_optimization: bool,
     /// Refit/re-score rounds per local optimization. Default 5.
     pub lo_iterations: usize,
+    /// A local-optimization refit uses at most this many of the inliers, the first ones
+    /// in the run's random item order (Lebeda, Matas & Chum, BMVC 2012, bound the LO
+    /// sample likewise); the re-scoring still covers all items. 0 = all inliers. Default
+    /// 256: the affine subspace of 256 tracks is determined to well below the noise, and
+    /// the refit's cost no longer grows with the number of inliers.
+    pub lo_max_inliers: usize,
     /// Attempts to draw a non-degenerate sample per iteration. Default 20.
     pub max_sample_attempts: usize,
     /// Probability that an inlier's residual is below the estimated threshold (`κ` is
@@ -185,6 +197,7 @@ impl Default for RansacConfig {
             min_iterations: 50,
             local_optimization: true,
             lo_iterations: 5,
+            lo_max_inliers: 256,
             max_sample_attempts: 20,
             inlier_probability: 0.999,
             scale_quantile: 0.25,
@@ -506,18 +519,30 @@ pub fn adaptive_iterations(
     }
 }
 
-/// Iterated least-squares local optimization (LO-RANSAC): refit on the inliers while the
-/// MSAC cost decreases.
+/// Iterated least-squares local optimization (LO-RANSAC): refit on the inliers (at most
+/// `max_inliers` of them, the first in `order`; 0 = all) while the MSAC cost decreases
+/// and the inlier set changes.
 fn local_optimize<E: Estimator>(
     est: &E,
     mut best: Scored<E::Model>,
-    n: usize,
+    order: &[usize],
     tau: f64,
     rounds: usize,
+    max_inliers: usize,
     improvements: &mut usize,
 ) -> Scored<E::Model> {
+    let n = order.len();
     for _ in 0..rounds {
-        let inl = inlier_indices(&best.residuals, tau);
+        let mut inl = inlier_indices(&best.residuals, tau);
+        if max_inliers > 0 && inl.len() > max_inliers {
+            inl = order
+                .iter()
+                .copied()
+                .filter(|&i| matches!(best.residuals[i], Some(r) if r <= tau))
+                .take(max_inliers)
+                .collect();
+            inl.sort_unstable();
+        }
         if inl.len() < est.min_sample_size() {
             break;
         }
@@ -526,8 +551,17 @@ fn local_optimize<E: Estimator>(
         };
         let cand = score(est, m, n, tau);
         if cand.cost < best.cost * (1.0 - 1e-9) {
+            // Converged when the inliers did not change: the next refit would fit the
+            // same entries from (nearly) the same start.
+            let same = (0..n).all(|i| {
+                matches!(cand.residuals[i], Some(r) if r <= tau)
+                    == matches!(best.residuals[i], Some(r) if r <= tau)
+            });
             best = cand;
             *improvements += 1;
+            if same {
+                break;
+            }
         } else {
             break;
         }
@@ -681,10 +715,14 @@ pub fn ransac_observed<E: Estimator, R: Rng + ?Sized>(
                     break;
                 }
                 let t = kappa * sg;
-                let inl: Vec<usize> = inlier_indices(&res, t)
+                // `sub` is in random order: its first inliers are a random subsample.
+                let mut inl: Vec<usize> = inlier_indices(&res, t)
                     .into_iter()
                     .map(|j| sub[j])
                     .collect();
+                if config.lo_max_inliers > 0 {
+                    inl.truncate(config.lo_max_inliers);
+                }
                 if inl.len() >= s
                     && let Some(m) = est.refit(&model, &inl)
                 {
@@ -735,9 +773,10 @@ pub fn ransac_observed<E: Estimator, R: Rng + ?Sized>(
                     local_optimize(
                         est,
                         cand,
-                        n,
+                        &order,
                         tau,
                         config.lo_iterations,
+                        config.lo_max_inliers,
                         &mut lo_improvements,
                     )
                 } else {
@@ -783,7 +822,15 @@ pub fn ransac_observed<E: Estimator, R: Rng + ?Sized>(
                 tau = t;
                 best = score(est, best.model, n, tau);
                 if config.local_optimization {
-                    best = local_optimize(est, best, n, tau, 1, &mut lo_improvements);
+                    best = local_optimize(
+                        est,
+                        best,
+                        &order,
+                        tau,
+                        1,
+                        config.lo_max_inliers,
+                        &mut lo_improvements,
+                    );
                 }
             }
             sigma = Some(sg);

@@ -38,7 +38,12 @@
 //!   frame (a frame is defined when ≥ 4 inliers with well-conditioned coordinates see it).
 //!   After every sweep, entries whose distance exceeds `sqrt(χ²₂(0.999)) · σ_e` with
 //!   `σ_e = median distance / sqrt(2 ln 2)` are given zero weight in the next sweep (hard
-//!   redescending reweighting), so gross entries do not pull the fit.
+//!   redescending reweighting), so gross entries do not pull the fit. The entries set
+//!   aside by the last sweep are reported ([`TrackSubspace::refit_reporting`]) so the
+//!   caller can tell whether its own gross-entry flags agree with the fit. The S-step and
+//!   the distances are computed in parallel over tracks, the M-step's normal equations
+//!   are accumulated over fixed chunks of tracks in parallel and summed in chunk order
+//!   (so the result does not depend on the thread count).
 //!
 //! Hypotheses defined on few frames can only score tracks overlapping them; unscored tracks
 //! cost as outliers in the MSAC score, so hypotheses (and refits) covering more frames and
@@ -158,6 +163,9 @@ pub struct TrackSubspace {
 /// 1e-6 moves the fit by far less than the noise (the cost's relative standard error is
 /// `~1/sqrt(#entries)`), and stops the slow linear tail of ALS early.
 const ALS_TOLERANCE: f64 = 1e-6;
+
+/// Tracks per chunk of the ALS M-step's parallel accumulation.
+const ALS_CHUNK: usize = 256;
 
 /// `sqrt(2 ln 2)`: the median of the distance of a 2D standard Gaussian.
 const RAYLEIGH_MEDIAN: f64 = 1.177_410_022_515_474_8;
@@ -447,6 +455,19 @@ impl TrackSubspace {
         inliers: &[usize],
         sweeps: usize,
     ) -> Option<AffineSubspace> {
+        self.refit_reporting(model, inliers, sweeps).map(|(m, _)| m)
+    }
+
+    /// [`TrackSubspace::refit_with`], also returning the usable (frame, track) entries of
+    /// `inliers`, in frames where the returned model is defined, that the last ALS sweep
+    /// gave zero weight (sorted): the returned model is the least-squares fit to the
+    /// usable entries of `inliers` without these (up to the ALS tolerance).
+    pub fn refit_reporting(
+        &self,
+        model: &AffineSubspace,
+        inliers: &[usize],
+        sweeps: usize,
+    ) -> Option<(AffineSubspace, Vec<(usize, usize)>)> {
         if inliers.len() < 4 {
             return None;
         }
@@ -483,13 +504,14 @@ impl TrackSubspace {
         })
     }
 
-    /// Alternating least squares with hard rejection of outlying entries.
+    /// Alternating least squares with hard rejection of outlying entries; also returns the
+    /// entries the last sweep gave zero weight (see [`TrackSubspace::refit_reporting`]).
     fn als(
         &self,
         mut model: AffineSubspace,
         inliers: &[usize],
         sweeps: usize,
-    ) -> Option<AffineSubspace> {
+    ) -> Option<(AffineSubspace, Vec<(usize, usize)>)> {
         let f = self.f;
         // Entry weights, aligned with frames_of of each inlier.
         let mut keep: Vec<Vec<bool>> = inliers
@@ -497,6 +519,10 @@ impl TrackSubspace {
             .map(|&p| vec![true; self.frames_of[p].len()])
             .collect();
         let mut coords: Vec<Option<[f64; 3]>> = vec![None; inliers.len()];
+        // The weights used by the last sweep's S- and M-steps.
+        let mut used: Vec<Vec<bool>> = Vec::new();
+        let mut d2s: Vec<Vec<f64>> = vec![Vec::new(); inliers.len()];
+        let mut d2all: Vec<f64> = Vec::new();
         let mut last_cost = f64::INFINITY;
         let chi2_cut = super::chi2_quantile(2.0, 0.999);
         for sweep in 0..sweeps.max(1) {
@@ -522,25 +548,45 @@ impl TrackSubspace {
                 })
                 .collect();
             // M-step: per frame, [m_x t_x; m_y t_y] from Σ [s;1][s;1]ᵀ.
-            let mut a = vec![Matrix4::<f64>::zeros(); f];
-            let mut bx = vec![Vector4::<f64>::zeros(); f];
-            let mut by = vec![Vector4::<f64>::zeros(); f];
-            let mut cnt = vec![0usize; f];
-            for (j, &p) in inliers.iter().enumerate() {
-                let Some(s) = coords[j] else { continue };
-                let v = Vector4::new(s[0], s[1], s[2], 1.0);
-                let vv = v * v.transpose();
-                for (&fr, &k) in self.frames_of[p].iter().zip(&keep[j]) {
-                    if !k {
-                        continue;
+            // Accumulated in parallel over fixed chunks of tracks, then summed in chunk
+            // order (the result does not depend on the thread count).
+            let (a, bx, by, cnt) = inliers
+                .par_chunks(ALS_CHUNK)
+                .enumerate()
+                .map(|(c, chunk)| {
+                    let mut a = vec![Matrix4::<f64>::zeros(); f];
+                    let mut bx = vec![Vector4::<f64>::zeros(); f];
+                    let mut by = vec![Vector4::<f64>::zeros(); f];
+                    let mut cnt = vec![0usize; f];
+                    for (jj, &p) in chunk.iter().enumerate() {
+                        let j = c * ALS_CHUNK + jj;
+                        let Some(s) = coords[j] else { continue };
+                        let v = Vector4::new(s[0], s[1], s[2], 1.0);
+                        let vv = v * v.transpose();
+                        for (&fr, &k) in self.frames_of[p].iter().zip(&keep[j]) {
+                            if !k {
+                                continue;
+                            }
+                            let fr = fr as usize;
+                            a[fr] += vv;
+                            bx[fr] += v * self.w(p, 2 * fr);
+                            by[fr] += v * self.w(p, 2 * fr + 1);
+                            cnt[fr] += 1;
+                        }
                     }
-                    let fr = fr as usize;
-                    a[fr] += vv;
-                    bx[fr] += v * self.w(p, 2 * fr);
-                    by[fr] += v * self.w(p, 2 * fr + 1);
-                    cnt[fr] += 1;
-                }
-            }
+                    (a, bx, by, cnt)
+                })
+                .collect::<Vec<_>>()
+                .into_iter()
+                .reduce(|mut acc, part| {
+                    for fr in 0..f {
+                        acc.0[fr] += part.0[fr];
+                        acc.1[fr] += part.1[fr];
+                        acc.2[fr] += part.2[fr];
+                        acc.3[fr] += part.3[fr];
+                    }
+                    acc
+                })?;
             for fr in 0..f {
                 let ok = cnt[fr] >= 4 && {
                     let e = a[fr].symmetric_eigenvalues();
@@ -572,17 +618,23 @@ impl TrackSubspace {
                     }
                 }
             }
+            used.clone_from(&keep);
             // Re-weighting: distances of all inlier entries, robust scale, hard cut.
-            let mut d2all = Vec::new();
-            let mut cost = 0.0;
-            for (j, &p) in inliers.iter().enumerate() {
-                let Some(s) = coords[j] else { continue };
-                for &fr in &self.frames_of[p] {
-                    if model.defined[fr as usize] {
-                        d2all.push(self.dist2(&model, p, fr as usize, &s));
-                    }
-                }
-            }
+            // Squared distances per entry (NaN: not scored), in parallel over tracks.
+            d2s.par_iter_mut()
+                .zip(inliers.par_iter().zip(coords.par_iter()))
+                .with_min_len(ALS_CHUNK)
+                .for_each(|(d2, (&p, s))| {
+                    d2.clear();
+                    d2.extend(self.frames_of[p].iter().map(|&fr| match s {
+                        Some(s) if model.defined[fr as usize] => {
+                            self.dist2(&model, p, fr as usize, s)
+                        }
+                        _ => f64::NAN,
+                    }));
+                });
+            d2all.clear();
+            d2all.extend(d2s.iter().flatten().copied().filter(|x| !x.is_nan()));
             if d2all.is_empty() {
                 return None;
             }
@@ -590,13 +642,12 @@ impl TrackSubspace {
             let med = *d2all.select_nth_unstable_by(mid, |x, y| x.total_cmp(y)).1;
             let sigma_e = med.sqrt() / RAYLEIGH_MEDIAN;
             let cut2 = chi2_cut * sigma_e * sigma_e;
-            for (j, &p) in inliers.iter().enumerate() {
-                let Some(s) = coords[j] else { continue };
-                for (idx, &fr) in self.frames_of[p].iter().enumerate() {
-                    if model.defined[fr as usize] {
-                        let d2 = self.dist2(&model, p, fr as usize, &s);
-                        keep[j][idx] = d2 <= cut2 || cut2 == 0.0;
-                        if keep[j][idx] {
+            let mut cost = 0.0;
+            for (kp, d2) in keep.iter_mut().zip(&d2s) {
+                for (k, &d2) in kp.iter_mut().zip(d2) {
+                    if !d2.is_nan() {
+                        *k = d2 <= cut2 || cut2 == 0.0;
+                        if *k {
                             cost += d2;
                         }
                     }
@@ -610,7 +661,16 @@ impl TrackSubspace {
         if model.n_defined() < self.min_overlap {
             return None;
         }
-        Some(model)
+        let mut excluded: Vec<(usize, usize)> = Vec::new();
+        for (j, &p) in inliers.iter().enumerate() {
+            for (&fr, &k) in self.frames_of[p].iter().zip(&used[j]) {
+                if !k && model.defined[fr as usize] {
+                    excluded.push((fr as usize, p));
+                }
+            }
+        }
+        excluded.sort_unstable();
+        Some((model, excluded))
     }
 }
 
