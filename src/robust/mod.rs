@@ -15,8 +15,10 @@
 //!    (least-quantile bootstrap, then the fixed point `σ = median{r ≤ κσ}`) and the track
 //!    threshold is `τ = κσ`, `κ = sqrt(χ²_ν(p)/ν)` (see [`subspace`]).
 //! 3. **Gross entries and final classification**: the model is refitted on the RANSAC
-//!    inliers; the entry noise `σ_e` is the median entry distance / sqrt(2 ln 2) (each
-//!    distance scaled by `1/sqrt(1 − 3/(2k))` for the track's 3 fitted coordinates); entries
+//!    inliers (ALS warm-started from the RANSAC model,
+//!    [`TrackSubspace::refit_warm_reporting`]); the entry noise `σ_e` is the median entry
+//!    distance / sqrt(2 ln 2) (each distance scaled by `1/sqrt(1 − 3/(2k))` for the
+//!    track's 3 fitted coordinates); entries
 //!    farther than `entry_threshold_px` (default `sqrt(χ²₂(entry_probability)) · σ_e`,
 //!    4.29 σ_e for p = 0.9999) from their track's fit are flagged (each track is refitted on
 //!    its entries within the threshold; when more than `max_flagged_fraction` would be
@@ -49,7 +51,7 @@
 //! each scored on `j̄` tracks of `k` frames before the bail-out test abandons it (`j̄` ≈
 //! 32–64 for hopeless hypotheses, the scale bootstrap on at most `scale_subset` tracks; see
 //! [`ransac`]); with missing data add O(I · N · F/64) for sampling; plus a few
-//! affine refits (O(F·N·3) SVD for complete data, O(#observations) per ALS sweep; the
+//! affine refits (O(#observations) per ALS sweep, warm-started from the RANSAC model; the
 //! local-optimization refits on at most `ransac.lo_max_inliers` tracks), plus per
 //! classification round O(#observations) for the track fits and O(32·k) per rejected track
 //! for the per-track frame-pair search (O(k²) for tracks it can rescue), plus the rival
@@ -411,7 +413,7 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
     // before the refit) and `als_excluded` (set aside by the refit's reweighting); sorted.
     let mut fit_flags: Vec<(usize, usize)> = Vec::new();
     let (mut model, mut als_excluded) = est
-        .refit_reporting(&ransac_model, &inl, config.subspace.final_als_iterations)
+        .refit_warm_reporting(&ransac_model, &inl, config.subspace.final_als_iterations)
         .unwrap_or((ransac_model, Vec::new()));
     let mut flagged: Vec<(usize, usize)>;
     let mut cur = est.clone();

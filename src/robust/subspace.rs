@@ -32,7 +32,10 @@
 //!   `σ = median of inlier residuals` (Wilson–Hilferty median correction).
 //! * **Refit** ([`Estimator::refit`], local optimization and final fit): an affine
 //!   factorization of the inlier tracks over *all* frames. Complete data: the centering
-//!   trick and a rank-3 truncated SVD ([`crate::svd`]). Then, or directly with missing
+//!   trick and a rank-3 truncated SVD ([`crate::svd`]), except when the current model is
+//!   already defined on every frame (a warm start: the local-optimization refits and
+//!   [`TrackSubspace::refit_warm_reporting`], used for the final fit), where ALS starts
+//!   from it directly. Then, or directly with missing
 //!   data, alternating least squares over the observed entries, started from the current
 //!   model: `s_p` by 3×3 least squares per track, `[M_f | t_f]` by 4×4 least squares per
 //!   frame (a frame is defined when ≥ 4 inliers with well-conditioned coordinates see it).
@@ -51,7 +54,7 @@
 //!
 //! Complexity: fit O(F); residual O(k) per track; one MSAC evaluation O(#observations);
 //! sampling with missing data O(N · F/64) per draw (bitset intersections); refit O(F·N)
-//! for the SVD on complete data plus O(#observations) per ALS sweep.
+//! for the SVD on complete data without a warm start, plus O(#observations) per ALS sweep.
 
 use faer::Mat;
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
@@ -478,6 +481,27 @@ impl TrackSubspace {
         self.als(init, inliers, sweeps)
     }
 
+    /// [`TrackSubspace::refit_reporting`] started from `model` itself when it is a warm
+    /// start: on complete data with `model` defined on every frame (e.g. the RANSAC
+    /// model, already a refit on a subset of the same inliers) the SVD initialization is
+    /// skipped and the ALS sweeps converge from `model` (at the rate `σ₄/σ₃ ≪ 1` of a
+    /// rank-3-plus-noise matrix) to the same least-squares fit; otherwise identical to
+    /// `refit_reporting`. Saves the O(F·N) SVD.
+    pub fn refit_warm_reporting(
+        &self,
+        model: &AffineSubspace,
+        inliers: &[usize],
+        sweeps: usize,
+    ) -> Option<(AffineSubspace, Vec<(usize, usize)>)> {
+        if self.complete && model.n_defined() == self.f {
+            if inliers.len() < 4 {
+                return None;
+            }
+            return self.als(model.clone(), inliers, sweeps);
+        }
+        self.refit_reporting(model, inliers, sweeps)
+    }
+
     /// Centering + rank-3 truncated SVD of the (complete) inlier columns.
     fn svd_fit(&self, inliers: &[usize]) -> Option<AffineSubspace> {
         let rows = 2 * self.f;
@@ -786,8 +810,14 @@ impl Estimator for TrackSubspace {
             .collect()
     }
 
+    /// Local-optimization refit: ALS started from `model` (`lo_als_iterations` sweeps).
+    /// On complete data a model defined on every frame is a warm start close to the
+    /// inliers' rank-3 fit (ALS on a rank-3-plus-noise matrix converges at the rate
+    /// `σ₄/σ₃ ≪ 1`), so the SVD initialization of [`TrackSubspace::refit_with`], which
+    /// would cost more than the sweeps themselves, is skipped; otherwise as `refit_with`.
     fn refit(&self, model: &AffineSubspace, inliers: &[usize]) -> Option<AffineSubspace> {
-        self.refit_with(model, inliers, self.cfg.lo_als_iterations)
+        self.refit_warm_reporting(model, inliers, self.cfg.lo_als_iterations)
+            .map(|(m, _)| m)
     }
 
     /// `σ = median(r) / m_ν` with the Wilson–Hilferty median of `sqrt(χ²_ν/ν)`,
