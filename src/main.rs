@@ -250,11 +250,19 @@ fn print_summary(rec: &Reconstruction, out: &Path) {
         .take(6)
         .map(|v| format!("{v:.4}"))
         .collect();
-    eprintln!(
-        "singular values: {} (σ4/σ3 = {:.4})",
-        sv.join(" "),
-        rec.rank_ratio
-    );
+    if rec.rank_ratio.is_finite() {
+        eprintln!(
+            "singular values: {} (σ4/σ3 = {:.4})",
+            sv.join(" "),
+            rec.rank_ratio
+        );
+    } else {
+        // With missing data the spectrum is that of the rank-3 completion: no σ4.
+        eprintln!(
+            "singular values of the completed matrix: {} (σ4/σ3 not defined)",
+            sv.join(" ")
+        );
+    }
     if let Some(r) = &rec.robust {
         eprintln!(
             "robust pass: {} inlier / {} outlier tracks, {} gross entries flagged (σ ≈ {:.3} px, \
