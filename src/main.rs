@@ -266,12 +266,13 @@ fn print_summary(rec: &Reconstruction, out: &Path) {
     if let Some(r) = &rec.robust {
         eprintln!(
             "robust pass: {} inlier / {} outlier tracks, {} gross entries flagged (σ ≈ {:.3} px, \
-             threshold {:.3} px, {:.2} s)",
+             RANSAC τ {:.3} px on trimmed RMS, entry threshold {:.3} px, {:.2} s)",
             r.n_inlier_tracks,
             r.n_outlier_tracks,
             r.n_flagged_entries,
             r.noise_sigma_px,
             r.threshold_px,
+            r.entry_threshold_px,
             r.seconds
         );
     }

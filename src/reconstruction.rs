@@ -164,7 +164,9 @@ pub struct RobustReport {
     pub flagged_entries: Vec<EntryId>,
     /// Robust estimate of the image noise σ, pixels.
     pub noise_sigma_px: f64,
-    /// Track-level threshold, pixels.
+    /// RANSAC's inlier threshold `τ` on a track's *trimmed* RMS residual, pixels (the final
+    /// keep/reject decision compares the untrimmed RMS with
+    /// `max(σ·sqrt(χ²_ν(p)/ν), min_track_threshold_px)`, see [`crate::robust`]).
     pub threshold_px: f64,
     /// Entry-level gross-error threshold, pixels.
     pub entry_threshold_px: f64,
