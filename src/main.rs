@@ -471,8 +471,13 @@ struct Tracked {
     stats: Vec<rank3::track::FrameStats>,
 }
 
-/// Tracks `input` with a progress bar; prints a summary to stderr.
-fn track_input(input: &Path, opts: &TrackOpts) -> Result<Tracked, rank3::Error> {
+/// Tracks `input` with a progress bar; prints a summary to stderr. `on_frame` sees every
+/// decoded frame with its index.
+fn track_input(
+    input: &Path,
+    opts: &TrackOpts,
+    on_frame: &mut dyn FnMut(usize, &rank3::track::GrayImage),
+) -> Result<Tracked, rank3::Error> {
     let cfg = opts.config();
     let init = opts
         .init_points
@@ -491,10 +496,11 @@ fn track_input(input: &Path, opts: &TrackOpts) -> Result<Tracked, rank3::Error> 
     let t0 = std::time::Instant::now();
     let cpu0 = process_cpu_seconds();
     let mut stats = Vec::new();
-    let result = rank3::track::track_source(&mut src, &cfg, init, &mut |s| {
+    let result = rank3::track::track_source(&mut src, &cfg, init, &mut |s, image| {
         bar.inc(1);
         bar.set_message(format!("{} alive", s.alive));
         stats.push(*s);
+        on_frame(s.frame, image);
     });
     bar.finish_and_clear();
     let (table, summary) = result?;
@@ -528,21 +534,15 @@ fn track_input(input: &Path, opts: &TrackOpts) -> Result<Tracked, rank3::Error> 
     Ok(Tracked { table, stats })
 }
 
-/// Records a tracking run: the frames (decoded a second time, JPEG-encoded), the tracker's
-/// per-frame counts, and the track table (points per frame and trajectories).
+/// Records what tracking produced besides the frames (logged as they are tracked): the
+/// tracker's per-frame counts, and the track table (points per frame and trajectories)
+/// when `log_table`.
 #[cfg(feature = "rerun")]
 fn record_tracking(
     rec: &rerun::RecordingStream,
-    input: &Path,
     tracked: &Tracked,
     log_table: bool,
 ) -> Result<(), rank3::Error> {
-    let mut src = rank3::track::FrameSource::open(input)?;
-    let mut index = 0;
-    while let Some((_, image)) = src.next_frame()? {
-        rank3::recording::log_frame(rec, index, &image, 85)?;
-        index += 1;
-    }
     rank3::recording::log_tracking(rec, &tracked.stats)?;
     if log_table {
         rank3::recording::log_input(rec, &tracked.table)?;
@@ -577,10 +577,26 @@ fn track_recorded(
     let recording = record.open("rank3")?;
     #[cfg(not(feature = "rerun"))]
     let recording = ();
-    let tracked = track_input(input, opts)?;
+    // Frames are recorded (JPEG) as they are tracked; the first logging failure is kept.
+    #[cfg(feature = "rerun")]
+    let mut log_error: Option<rank3::recording::RecordingError> = None;
+    #[cfg_attr(not(feature = "rerun"), allow(unused_variables))]
+    let tracked = track_input(input, opts, &mut |index, image| {
+        #[cfg(feature = "rerun")]
+        if let Some(rec) = &recording
+            && log_error.is_none()
+            && let Err(e) = rank3::recording::log_frame(rec, index, image, 85)
+        {
+            log_error = Some(e);
+        }
+    })?;
+    #[cfg(feature = "rerun")]
+    if let Some(e) = log_error {
+        return Err(e.into());
+    }
     #[cfg(feature = "rerun")]
     if let Some(rec) = &recording {
-        record_tracking(rec, input, &tracked, log_table)?;
+        record_tracking(rec, &tracked, log_table)?;
     }
     Ok((tracked, recording))
 }

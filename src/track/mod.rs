@@ -440,14 +440,16 @@ pub fn read_init_points(path: &Path) -> Result<Vec<[f64; 2]>> {
 }
 
 /// Tracks a whole frame source. `init_points` switch to following those points (no
-/// re-detection unless `cfg.redetect_with_points`). `progress` is called after every frame.
+/// re-detection unless `cfg.redetect_with_points`). `progress` is called after every frame
+/// with its counts and the decoded image (so a caller can record the frames without
+/// decoding them again).
 /// Frames are decoded one ahead on a scoped reader thread (at most two waiting), so decoding
 /// overlaps tracking.
 pub fn track_source(
     source: &mut FrameSource,
     cfg: &TrackerConfig,
     init_points: Option<Vec<[f64; 2]>>,
-    progress: &mut dyn FnMut(&FrameStats),
+    progress: &mut dyn FnMut(&FrameStats, &GrayImage),
 ) -> Result<(TrackTable, TrackSummary)> {
     let mut tracker = match init_points {
         Some(p) => Tracker::with_points(cfg.clone(), p)?,
@@ -470,7 +472,7 @@ pub fn track_source(
         for item in rx.iter() {
             match item {
                 Ok(Some((id, img))) => match tracker.push(id, &img) {
-                    Ok(s) => progress(&s),
+                    Ok(s) => progress(&s, &img),
                     Err(e) => {
                         out = Err(e);
                         break;
@@ -506,5 +508,5 @@ pub fn track_path(
     init_points: Option<Vec<[f64; 2]>>,
 ) -> Result<(TrackTable, TrackSummary)> {
     let mut src = FrameSource::open(path)?;
-    track_source(&mut src, cfg, init_points, &mut |_| {})
+    track_source(&mut src, cfg, init_points, &mut |_, _| {})
 }
