@@ -222,12 +222,17 @@ fn normal_solve(
     y: &[[f64; 2]],
     idx: impl Iterator<Item = usize>,
 ) -> Option<[f64; 3]> {
+    normal_solve_rows(m, idx.map(|i| (fr[i] as usize, y[i])))
+}
+
+/// Least-squares `s = argmin Σ ‖M_f s − y‖²` over `(frame f, y)` pairs of a row-major 2F×3
+/// motion `m` (normal equations, [`solve3`]). O(#pairs).
+#[inline]
+fn normal_solve_rows(m: &[f64], rows: impl Iterator<Item = (usize, [f64; 2])>) -> Option<[f64; 3]> {
     let (mut g00, mut g01, mut g02, mut g11, mut g12, mut g22) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     let (mut b0, mut b1, mut b2) = (0.0, 0.0, 0.0);
-    for i in idx {
-        let f = fr[i] as usize;
+    for (f, [yx, yy]) in rows {
         let r = &m[6 * f..6 * f + 6];
-        let [yx, yy] = y[i];
         g00 += r[0] * r[0] + r[3] * r[3];
         g01 += r[0] * r[1] + r[3] * r[4];
         g02 += r[0] * r[2] + r[3] * r[5];
@@ -352,26 +357,14 @@ impl TrackSubspace {
     pub fn ls_coords(&self, model: &AffineSubspace, p: usize, frames: &[u32]) -> Option<[f64; 3]> {
         let rows = 2 * self.f;
         let w = &self.obs[p * rows..(p + 1) * rows];
-        let m = &model.m;
-        let (mut g00, mut g01, mut g02, mut g11, mut g12, mut g22) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-        let (mut b0, mut b1, mut b2) = (0.0, 0.0, 0.0);
-        for &fr in frames {
-            let f = fr as usize;
-            let r = &m[6 * f..6 * f + 6];
-            let yx = w[2 * f] - model.t[2 * f];
-            let yy = w[2 * f + 1] - model.t[2 * f + 1];
-            g00 += r[0] * r[0] + r[3] * r[3];
-            g01 += r[0] * r[1] + r[3] * r[4];
-            g02 += r[0] * r[2] + r[3] * r[5];
-            g11 += r[1] * r[1] + r[4] * r[4];
-            g12 += r[1] * r[2] + r[4] * r[5];
-            g22 += r[2] * r[2] + r[5] * r[5];
-            b0 += r[0] * yx + r[3] * yy;
-            b1 += r[1] * yx + r[4] * yy;
-            b2 += r[2] * yx + r[5] * yy;
-        }
-        let g = Matrix3::new(g00, g01, g02, g01, g11, g12, g02, g12, g22);
-        solve3(&g, &Vector3::new(b0, b1, b2)).map(|s| [s[0], s[1], s[2]])
+        let t = &model.t;
+        normal_solve_rows(
+            &model.m,
+            frames.iter().map(|&fr| {
+                let f = fr as usize;
+                (f, [w[2 * f] - t[2 * f], w[2 * f + 1] - t[2 * f + 1]])
+            }),
+        )
     }
 
     /// Squared image distance of track `p`'s observation in frame `fr` to `M_f s + t_f`.
