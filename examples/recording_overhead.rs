@@ -9,6 +9,11 @@
 //! Plain and recorded runs alternate so that a change in machine load hits both alike; the
 //! figures are medians over `RUNS` (default 9) pairs, plus the median of the per-pair
 //! differences.
+//!
+//! When the `rank3` binary sits next to this example's directory (`cargo build --release
+//! --bins --examples`), the same table is also written to CSV and `rank3 reconstruct
+//! t.csv --out DIR` is timed end to end with and without `--rrd`, alternating likewise: what
+//! a user of the CLI pays for the recording.
 
 use std::time::Instant;
 
@@ -129,6 +134,59 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         100.0 * median(&cpu_diffs) / median(&plain_cpu)
     );
     println!(".rrd size: {:.2} MB ({} bytes)", size as f64 / 1e6, size);
+    cli_overhead(table, &dir, runs)?;
     std::fs::remove_dir_all(&dir).ok();
+    Ok(())
+}
+
+/// `rank3 reconstruct` end to end, with and without `--rrd`, `runs` alternating pairs.
+fn cli_overhead(
+    table: &rank3::TrackTable,
+    dir: &std::path::Path,
+    runs: usize,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let exe = std::env::current_exe()?;
+    let Some(bin) = exe
+        .parent()
+        .and_then(|d| d.parent())
+        .map(|d| d.join("rank3"))
+        .filter(|b| b.is_file())
+    else {
+        println!("CLI: no rank3 binary next to the examples (cargo build --release --bins)");
+        return Ok(());
+    };
+    let csv = dir.join("t.csv");
+    table.write(&csv)?;
+    let time = |extra: &[&std::ffi::OsStr]| -> Result<f64, Box<dyn std::error::Error>> {
+        let t0 = Instant::now();
+        let out = std::process::Command::new(&bin)
+            .arg("reconstruct")
+            .arg(&csv)
+            .arg("--out")
+            .arg(dir.join("out"))
+            .args(extra)
+            .output()?;
+        let t = t0.elapsed().as_secs_f64();
+        if !out.status.success() {
+            return Err(String::from_utf8_lossy(&out.stderr).into_owned().into());
+        }
+        Ok(t)
+    };
+    let rrd = dir.join("cli.rrd");
+    let (mut plain, mut recorded) = (Vec::new(), Vec::new());
+    for _ in 0..runs {
+        plain.push(time(&[])?);
+        recorded.push(time(&["--rrd".as_ref(), rrd.as_os_str()])?);
+    }
+    let d: Vec<f64> = recorded.iter().zip(&plain).map(|(r, p)| r - p).collect();
+    let (p, d) = (median(&plain), median(&d));
+    println!(
+        "CLI `rank3 reconstruct t.csv --out DIR` end to end: {:.1} ms without, {:.1} ms with \
+         --rrd; overhead (median of per-pair differences) {:.1} ms = {:.1} %",
+        1e3 * p,
+        1e3 * median(&recorded),
+        1e3 * d,
+        100.0 * d / p
+    );
     Ok(())
 }
