@@ -430,11 +430,10 @@ fn cli_rrd_flag_records_synth_and_reconstruct() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// The viewer's own loader (`rerun rrd verify`, Rerun CLI 0.36.3) accepts the file. Skipped
-/// with a message when no `rerun` 0.36.3 is on PATH (or in `$RERUN_BIN`); install it with
-/// `pip install rerun-sdk==0.36.3` or `cargo install rerun-cli --version 0.36.3 --locked`.
-#[test]
-fn rerun_viewer_verifies_the_recording() {
+/// The Rerun CLI 0.36.3 (`$RERUN_BIN` or `rerun` on PATH), or `None` with a message saying
+/// why the calling test is skipped. Install it with `pip install rerun-sdk==0.36.3` or
+/// `cargo install rerun-cli --version 0.36.3 --locked` (`.ci/run` does the former).
+fn rerun_cli() -> Option<String> {
     let bin = std::env::var("RERUN_BIN").unwrap_or_else(|_| "rerun".into());
     let version = std::process::Command::new(&bin)
         .arg("--version")
@@ -444,13 +443,21 @@ fn rerun_viewer_verifies_the_recording() {
         Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
         _ => {
             eprintln!("SKIPPED: no `rerun` CLI on PATH (pip install rerun-sdk==0.36.3)");
-            return;
+            return None;
         }
     };
     if !version.contains(" 0.36.3 ") {
         eprintln!("SKIPPED: `rerun` is not 0.36.3 ({})", version.trim());
-        return;
+        return None;
     }
+    Some(bin)
+}
+
+/// The viewer's own loader (`rerun rrd verify`, Rerun CLI 0.36.3) accepts the file. Skipped
+/// with a message when the Rerun CLI is missing ([`rerun_cli`]).
+#[test]
+fn rerun_viewer_verifies_the_recording() {
+    let Some(bin) = rerun_cli() else { return };
     let (table, _) = table();
     let dir = std::env::temp_dir().join(format!("rank3-recording-verify-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -475,6 +482,75 @@ fn rerun_viewer_verifies_the_recording() {
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `rank3 reconstruct --connect URL` streams the recording to a running Rerun server: a
+/// headless `rerun --port P --save FILE` (the Rerun CLI 0.36.3, skipped without it) receives
+/// it and saves what arrived, which is then decoded and checked.
+#[test]
+fn cli_connect_streams_to_a_rerun_server() {
+    let Some(bin) = rerun_cli() else { return };
+    let dir = std::env::temp_dir().join(format!("rank3-recording-connect-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = dir.display().to_string();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let received = dir.join("received.rrd");
+    let mut server = std::process::Command::new(&bin)
+        .args(["--port", &port.to_string(), "--save"])
+        .arg(&received)
+        .env("RERUN_ANALYTICS", "0")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the Rerun server did not listen"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    rank3_ok([
+        "synth",
+        "--out",
+        &format!("{d}/scene"),
+        "--frames",
+        "6",
+        "--points",
+        "20",
+    ]);
+    rank3_ok([
+        "reconstruct",
+        &format!("{d}/scene/tracks.csv"),
+        "--out",
+        &format!("{d}/out"),
+        "--connect",
+        &format!("rerun+http://127.0.0.1:{port}/proxy"),
+    ]);
+    // Ctrl-C ends the server, which closes the saved stream.
+    let _ = std::process::Command::new("kill")
+        .args(["-INT", &server.id().to_string()])
+        .status();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while server.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            server.kill().ok();
+            panic!("the Rerun server did not stop on SIGINT");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let got = read_rrd(&received);
+    assert_eq!(got.get(paths::TRACKS, "Points2D:positions").total(), 6 * 20);
+    assert_eq!(got.get(paths::POINTS, "Points3D:positions").total(), 20);
+    assert_eq!(got.get(paths::CAMERA, "Transform3D:mat3x3").rows(), 6);
+    assert_eq!(got.get(paths::SUMMARY, "TextDocument:text").rows(), 1);
     std::fs::remove_dir_all(&dir).ok();
 }
 
