@@ -154,6 +154,9 @@ pub enum RecordingError {
     /// Building an Arrow array for a bulk log call failed (an internal inconsistency).
     #[error("rerun recording: arrow: {0}")]
     Arrow(#[from] ArrowError),
+    /// A sink could not flush what was logged (e.g. the .rrd could not be written).
+    #[error("rerun recording: flush: {0}")]
+    Flush(#[from] rerun::sink::SinkFlushError),
 }
 
 impl From<rerun::SerializationError> for RecordingError {
@@ -174,6 +177,9 @@ impl From<RecordingError> for Error {
                 Error::io("rerun recording", std::io::Error::other(e.to_string()))
             }
             RecordingError::Arrow(e) => {
+                Error::io("rerun recording", std::io::Error::other(e.to_string()))
+            }
+            RecordingError::Flush(e) => {
                 Error::io("rerun recording", std::io::Error::other(e.to_string()))
             }
         }
@@ -287,8 +293,8 @@ pub fn reconstruct_recorded_with(
 }
 
 /// [`reconstruct_recorded_with`], and then `also(&result)` runs on the calling thread while
-/// the result is logged on a second thread (what the CLI does with its output files, so
-/// that the recording's share of the run overlaps other work). Without `rec`, `also` just
+/// the result is logged, and the sinks flushed, on a second thread (what the CLI does with
+/// its output files, so that the recording's share of the run overlaps other work). Without `rec`, `also` just
 /// runs after the pipeline. An error of the pipeline is logged and returned without
 /// running `also`.
 pub fn reconstruct_recorded_then<T>(
@@ -321,7 +327,11 @@ pub fn reconstruct_recorded_then<T>(
             .push(format!("recording: {n} log call(s) failed, first: {first}"));
     }
     let (logged, t) = std::thread::scope(|s| {
-        let logger = s.spawn(|| log_result(rec, table, &result));
+        let logger = s.spawn(|| {
+            log_result(rec, table, &result)?;
+            rec.flush_blocking()?;
+            Ok::<(), RecordingError>(())
+        });
         let t = also(&result);
         let logged = logger
             .join()
