@@ -27,22 +27,19 @@ fn median(v: &[f64]) -> f64 {
     v[v.len() / 2]
 }
 
-/// CPU time (user + system, all threads) of this process in seconds, from /proc (Linux);
-/// NaN elsewhere.
+/// CPU time (user + system, all threads, including finished ones) of this process in
+/// seconds: `clock_gettime(CLOCK_PROCESS_CPUTIME_ID)`, nanosecond resolution (the kernel's
+/// per-thread accounting); NaN if the clock is unavailable.
 fn cpu_seconds() -> f64 {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return f64::NAN;
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
     };
-    let Some(end) = stat.rfind(')') else {
+    // SAFETY: `ts` is a valid, writable timespec for the duration of the call.
+    if unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) } != 0 {
         return f64::NAN;
-    };
-    let fields: Vec<&str> = stat[end + 1..].split_whitespace().collect();
-    // Fields 14 and 15 of stat(5) (utime, stime), counted after the command name.
-    let ticks = |i: usize| fields.get(i).and_then(|v| v.parse::<f64>().ok());
-    match (ticks(11), ticks(12)) {
-        (Some(u), Some(s)) => (u + s) / 100.0,
-        _ => f64::NAN,
     }
+    ts.tv_sec as f64 + 1e-9 * ts.tv_nsec as f64
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
