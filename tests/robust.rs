@@ -112,6 +112,38 @@ fn outlier_tracks_of_each_kind_are_rejected(missing: f64) {
     }
 }
 
+/// A track that drifts away from the rigid motion (another object, a slide) can look like
+/// a good track with a few gross entries: its worst frames exceed the entry threshold
+/// modestly, and without them the rest passes. Such *ambiguous* flags count in the track
+/// test (`gross_entry_factor`), so these tracks are rejected. Scenes of the benchmark's
+/// size with 40 % missing, where the rule `gross_entry_factor = 1` (ambiguous flags ignored)
+/// kept 3–7 of the 90 outlier tracks (recall 0.922, 0.911; robust_benchmark seeds 1, 2).
+#[test]
+fn drifting_tracks_cannot_hide_behind_entry_flags() {
+    for (kind, seed) in [(OutlierKind::SecondObject, 1), (OutlierKind::Mixed, 2)] {
+        let s = generate(&SynthConfig {
+            frames: 30,
+            points: 300,
+            outliers: 0.3,
+            outlier_kind: kind,
+            gross: 0.05,
+            missing: 0.4,
+            min_track_length: 6,
+            seed,
+            ..Default::default()
+        })
+        .unwrap();
+        let r = run(&s, 1);
+        let (p, rc) = track_pr(&s, &r);
+        // 90 outlier tracks: 0.95 allows 4 misses, a few of which (short windows) are
+        // within noise of a rigid trajectory.
+        assert!(
+            p >= 0.98 && rc >= 0.95,
+            "{kind:?} seed {seed}: precision {p:.3}, recall {rc:.3}"
+        );
+    }
+}
+
 #[test]
 fn clean_scene_keeps_nearly_every_track() {
     for missing in [0.0, 0.3] {

@@ -24,9 +24,11 @@
 //!    its entries within the threshold; when more than `max_flagged_fraction` would be
 //!    flagged, a per-track RANSAC over frame pairs looks for a better start; it gives up
 //!    early on tracks where no pair explains half the entries a passing track keeps). A
-//!    track is an inlier when its unflagged RMS `r` over `k` frames passes the χ² test
-//!    `r ≤ σ_e sqrt(χ²_ν(track_probability)/ν)`, `ν = 2k − 3` (or `r ≤ threshold_px` when
-//!    given), and at most `max_flagged_fraction` of its entries are flagged. The model is
+//!    track is an inlier when the RMS `r` of its unflagged entries and its *ambiguous* flagged
+//!    ones (closer than `gross_entry_factor` × the entry threshold: these may be the worst
+//!    frames of a drifting track rather than glitches) over those `k` frames passes the χ²
+//!    test `r ≤ σ_e sqrt(χ²_ν(track_probability)/ν)`, `ν = 2k − 3` (or `r ≤ threshold_px`
+//!    when given), and at most `max_flagged_fraction` of its entries are flagged. The model is
 //!    refitted without the flagged entries and this is repeated (at most
 //!    `max_gross_rounds` refits) until it has converged: the inliers are the ones the model
 //!    was fitted to, and the entries whose flag changed since the model was fitted (other
@@ -108,6 +110,15 @@ pub struct RobustConfig {
     /// A track with more than this fraction of its entries flagged is an outlier track.
     /// Default 0.3.
     pub max_flagged_fraction: f64,
+    /// Flagged entries closer to their track's fit than `gross_entry_factor` times the entry
+    /// threshold are *ambiguous*: an isolated glitch of a good track, or the worst frames
+    /// of a track that drifts away from the rigid motion (a slide along an edge, a point on
+    /// another object) and would otherwise pass its test by shedding them. They stay
+    /// flagged, but they also count in the track's χ² test (`r` and `k` include them); only
+    /// entries beyond the factor are gross enough to be set aside from it. Default 2 (8.6
+    /// σ_e at the default entry threshold). `f64::INFINITY` counts every flagged entry;
+    /// 1 counts none (the rule before this setting existed).
+    pub gross_entry_factor: f64,
     /// Below this inlier fraction there is no rigid majority. Default 0.4.
     pub min_inlier_fraction: f64,
     /// A rival rigid group among the rejected tracks with at least this many tracks
@@ -137,6 +148,7 @@ impl Default for RobustConfig {
             track_probability: 0.9999,
             max_gross_rounds: 5,
             max_flagged_fraction: 0.3,
+            gross_entry_factor: 2.0,
             min_inlier_fraction: 0.4,
             max_rival_ratio: 0.6,
             max_relative_noise: 0.05,
@@ -193,6 +205,12 @@ impl RobustConfig {
             return bad(
                 "track_probability",
                 format!("{} is not in (0.5, 1)", self.track_probability),
+            );
+        }
+        if !(self.gross_entry_factor >= 1.0) {
+            return bad(
+                "gross_entry_factor",
+                format!("{} is not ≥ 1", self.gross_entry_factor),
             );
         }
         if !(0.0..=1.0).contains(&self.max_flagged_fraction) {
@@ -419,98 +437,111 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
     let mut cur = est.clone();
     let mut sigma_e = f64::NAN;
     let mut rounds = 0;
+    // Ambiguous flags count in the track test only once the model has settled: while it
+    // is still off in some frame, good tracks have moderate distances there.
+    let mut strict = false;
     let entry_k = chi2_quantile(2.0, config.entry_probability).sqrt();
     // Noise floor for noise-free input (keeps thresholds positive).
     let floor = 1e-9 * meas.w.norm_max().max(1.0);
+    // The fits of the last round, kept for the re-classification once settled.
+    let mut reuse: Option<(Vec<Option<EntryFit>>, f64)> = None;
     let (fits, entry_thr) = loop {
-        // Robust entry scale from the inlier tracks' entries: first from the trimmed fits
-        // (biased low: trimming keeps the best frames), then from the threshold-based fits;
-        // each distance scaled by 1/sqrt(1 − 3/(2k)) for the 3 coordinates fitted from k
-        // frames; σ_e = median / sqrt(2 ln 2).
-        let scale_of = |fits: &[Option<[f64; 3]>]| -> Option<f64> {
-            let mut d: Vec<f64> = Vec::new();
-            for &p in &inl {
-                let Some(s) = &fits[p] else { continue };
-                let k = est
-                    .frames_of(p)
-                    .iter()
-                    .filter(|&&f| model.defined[f as usize])
-                    .count() as f64;
-                let lev = (1.0 - 3.0 / (2.0 * k)).max(0.1).sqrt();
-                for &fr in est.frames_of(p) {
-                    if model.defined[fr as usize] {
-                        d.push(est.dist2(&model, p, fr as usize, s).sqrt() / lev);
+        let (fits, entry_thr) = if let Some(kept) = reuse.take() {
+            kept
+        } else {
+            // Robust entry scale from the inlier tracks' entries: first from the trimmed fits
+            // (biased low: trimming keeps the best frames), then from the threshold-based fits;
+            // each distance scaled by 1/sqrt(1 − 3/(2k)) for the 3 coordinates fitted from k
+            // frames; σ_e = median / sqrt(2 ln 2).
+            let scale_of = |fits: &[Option<[f64; 3]>]| -> Option<f64> {
+                let mut d: Vec<f64> = Vec::new();
+                for &p in &inl {
+                    let Some(s) = &fits[p] else { continue };
+                    let k = est
+                        .frames_of(p)
+                        .iter()
+                        .filter(|&&f| model.defined[f as usize])
+                        .count() as f64;
+                    let lev = (1.0 - 3.0 / (2.0 * k)).max(0.1).sqrt();
+                    for &fr in est.frames_of(p) {
+                        if model.defined[fr as usize] {
+                            d.push(est.dist2(&model, p, fr as usize, s).sqrt() / lev);
+                        }
                     }
                 }
-            }
-            (!d.is_empty()).then(|| (median_in_place(&mut d) / 1.177_410_022_515_474_8).max(floor))
-        };
-        // Only the inlier tracks' fits enter the scale.
-        let is_inl = {
-            let mut v = vec![false; n];
-            for &p in &inl {
-                v[p] = true;
-            }
-            v
-        };
-        // Trimmed fits of all tracks (the start of every entry fit below).
-        let starts: Vec<Option<TrackFit>> = (0..n)
-            .into_par_iter()
-            .with_min_len(64)
-            .map(|p| cur.track_fit(&model, p))
-            .collect();
-        let trimmed: Vec<Option<[f64; 3]>> = (0..n)
-            .map(|p| {
-                if is_inl[p] {
-                    starts[p].map(|f| f.s)
-                } else {
-                    None
+                (!d.is_empty())
+                    .then(|| (median_in_place(&mut d) / 1.177_410_022_515_474_8).max(floor))
+            };
+            // Only the inlier tracks' fits enter the scale.
+            let is_inl = {
+                let mut v = vec![false; n];
+                for &p in &inl {
+                    v[p] = true;
                 }
-            })
-            .collect();
-        if let Some(sg) = scale_of(&trimmed) {
-            sigma_e = sg;
-        }
-        let thr0 = config
-            .entry_threshold_px
-            .unwrap_or((entry_k * sigma_e).max(config.min_entry_threshold_px));
-        let fits0: Vec<Option<[f64; 3]>> = (0..n)
-            .into_par_iter()
-            .map(|p| {
-                if is_inl[p] {
+                v
+            };
+            // Trimmed fits of all tracks (the start of every entry fit below).
+            let starts: Vec<Option<TrackFit>> = (0..n)
+                .into_par_iter()
+                .with_min_len(64)
+                .map(|p| cur.track_fit(&model, p))
+                .collect();
+            let trimmed: Vec<Option<[f64; 3]>> = (0..n)
+                .map(|p| {
+                    if is_inl[p] {
+                        starts[p].map(|f| f.s)
+                    } else {
+                        None
+                    }
+                })
+                .collect();
+            if let Some(sg) = scale_of(&trimmed) {
+                sigma_e = sg;
+            }
+            let thr0 = config
+                .entry_threshold_px
+                .unwrap_or((entry_k * sigma_e).max(config.min_entry_threshold_px));
+            let fits0: Vec<Option<[f64; 3]>> = (0..n)
+                .into_par_iter()
+                .map(|p| {
+                    if is_inl[p] {
+                        entry_fit(
+                            &est,
+                            &model,
+                            p,
+                            starts[p].as_ref(),
+                            thr0,
+                            config.gross_entry_factor,
+                            config.max_flagged_fraction,
+                        )
+                        .map(|f| f.s)
+                    } else {
+                        None
+                    }
+                })
+                .collect();
+            if let Some(sg) = scale_of(&fits0) {
+                sigma_e = sg;
+            }
+            let entry_thr = config
+                .entry_threshold_px
+                .unwrap_or((entry_k * sigma_e).max(config.min_entry_threshold_px));
+            let fits: Vec<Option<EntryFit>> = (0..n)
+                .into_par_iter()
+                .map(|p| {
                     entry_fit(
                         &est,
                         &model,
                         p,
                         starts[p].as_ref(),
-                        thr0,
+                        entry_thr,
+                        config.gross_entry_factor,
                         config.max_flagged_fraction,
                     )
-                    .map(|f| f.s)
-                } else {
-                    None
-                }
-            })
-            .collect();
-        if let Some(sg) = scale_of(&fits0) {
-            sigma_e = sg;
-        }
-        let entry_thr = config
-            .entry_threshold_px
-            .unwrap_or((entry_k * sigma_e).max(config.min_entry_threshold_px));
-        let fits: Vec<Option<EntryFit>> = (0..n)
-            .into_par_iter()
-            .map(|p| {
-                entry_fit(
-                    &est,
-                    &model,
-                    p,
-                    starts[p].as_ref(),
-                    entry_thr,
-                    config.max_flagged_fraction,
-                )
-            })
-            .collect();
+                })
+                .collect();
+            (fits, entry_thr)
+        };
         // χ²_ν(track_probability)/ν for ν = 2k − 3, k = 0..=F (computed once per round).
         let chi2_ratio: Vec<f64> = (0..=nf)
             .map(|k| {
@@ -535,12 +566,17 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                 }
                 continue;
             };
+            // The unflagged entries and the ambiguous flagged ones face the χ² test.
+            let (rms, k) = if strict {
+                fit.test_rms()
+            } else {
+                (fit.rms, fit.kept)
+            };
             let limit = match config.ransac.threshold_px {
                 Some(t) => t,
-                None => (sigma_e * chi2_ratio[fit.kept.min(nf)].sqrt())
-                    .max(config.min_track_threshold_px),
+                None => (sigma_e * chi2_ratio[k.min(nf)].sqrt()).max(config.min_track_threshold_px),
             };
-            if fit.rms > limit
+            if rms > limit
                 || fit.flagged.len() as f64 > config.max_flagged_fraction * fit.seen as f64
             {
                 continue;
@@ -571,6 +607,13 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
         flagged = new_flags;
         inl = new_inl;
         if converged || rounds >= config.max_gross_rounds || inl.len() < 4 {
+            if !strict && inl.len() >= 4 && config.gross_entry_factor > 1.0 {
+                // Settled: classify again (same model), counting the ambiguous flags.
+                strict = true;
+                rounds = 0;
+                reuse = Some((fits, entry_thr));
+                continue;
+            }
             break (fits, entry_thr);
         }
         rounds += 1;
@@ -687,6 +730,24 @@ struct EntryFit {
     kept: usize,
     /// Observed frames where the model is defined.
     seen: usize,
+    /// Sum of squared distances of the unflagged entries.
+    ss: f64,
+    /// Flagged entries within the ambiguity bound (`gross_entry_factor` × threshold) and the
+    /// sum of their squared distances.
+    ambiguous: usize,
+    ambiguous_ss: f64,
+}
+
+impl EntryFit {
+    /// RMS for the track test: the unflagged entries plus the ambiguous flagged ones
+    /// (per coordinate, corrected for the 3 fitted coordinates), and their number.
+    fn test_rms(&self) -> (f64, usize) {
+        let k = self.kept + self.ambiguous;
+        (
+            ((self.ss + self.ambiguous_ss) / ((2 * k) as f64 - 3.0)).sqrt(),
+            k,
+        )
+    }
 }
 
 /// Starting from `s`, twice: keep the entries within `thr2` (squared), refit on them;
@@ -698,6 +759,7 @@ fn threshold_refit(
     frames: &[u32],
     mut s: [f64; 3],
     thr2: f64,
+    ambiguous2: f64,
 ) -> Option<EntryFit> {
     let mut good: Vec<u32> = Vec::with_capacity(frames.len());
     for _ in 0..2 {
@@ -717,8 +779,8 @@ fn threshold_refit(
         }
     }
     let mut flagged = Vec::new();
-    let mut ss = 0.0;
-    let mut kept = 0usize;
+    let (mut ss, mut kept) = (0.0, 0usize);
+    let (mut ambiguous_ss, mut ambiguous) = (0.0, 0usize);
     for &f in frames {
         let d2 = est.dist2(model, p, f as usize, &s);
         if d2 <= thr2 {
@@ -726,6 +788,10 @@ fn threshold_refit(
             kept += 1;
         } else {
             flagged.push(f as usize);
+            if d2 <= ambiguous2 {
+                ambiguous_ss += d2;
+                ambiguous += 1;
+            }
         }
     }
     (kept >= 2).then(|| EntryFit {
@@ -734,12 +800,16 @@ fn threshold_refit(
         flagged,
         kept,
         seen: frames.len(),
+        ss,
+        ambiguous,
+        ambiguous_ss,
     })
 }
 
 /// Fits track `p` to `model` with its gross entries set aside: start from the trimmed fit
 /// `start` (of `cur`, which excludes the entries flagged so far) and refit on the entries
-/// within `thr` ([`threshold_refit`]). When that leaves more than `max_flagged` of the
+/// within `thr` ([`threshold_refit`]; flagged entries within `ambiguous_factor · thr` are
+/// counted as ambiguous). When that leaves more than `max_flagged` of the
 /// entries flagged (the trimmed start was pulled by several gross entries), a per-track
 /// RANSAC over frame pairs (2 frames = 4 equations for the 3 coordinates; pairs
 /// `(i, i + k/3)` and `(i, i + k/2)`, `i` in a spread order) looks for the largest set of
@@ -755,6 +825,7 @@ fn entry_fit(
     p: usize,
     start: Option<&TrackFit>,
     thr: f64,
+    ambiguous_factor: f64,
     max_flagged: f64,
 ) -> Option<EntryFit> {
     let start = start?;
@@ -765,7 +836,8 @@ fn entry_fit(
         .filter(|&f| model.defined[f as usize])
         .collect();
     let thr2 = thr * thr;
-    let first = threshold_refit(est, model, p, &frames, start.s, thr2);
+    let ambiguous2 = thr2 * ambiguous_factor * ambiguous_factor;
+    let first = threshold_refit(est, model, p, &frames, start.s, thr2, ambiguous2);
     let k = frames.len();
     let acceptable = |e: &EntryFit| e.flagged.len() as f64 <= max_flagged * k as f64;
     if first.as_ref().is_some_and(acceptable) || k < 4 {
@@ -816,7 +888,8 @@ fn entry_fit(
             }
         }
     }
-    let second = best.and_then(|(_, s)| threshold_refit(est, model, p, &frames, s, thr2));
+    let second =
+        best.and_then(|(_, s)| threshold_refit(est, model, p, &frames, s, thr2, ambiguous2));
     match (first, second) {
         (Some(a), Some(b)) => Some(if b.kept > a.kept { b } else { a }),
         (a, b) => a.or(b),
