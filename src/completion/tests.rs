@@ -128,6 +128,10 @@ fn invalid_config_is_a_typed_error() {
             creep_tolerance: -1.0,
             ..Default::default()
         },
+        CompletionConfig {
+            geodesic_acceleration: f64::INFINITY,
+            ..Default::default()
+        },
     ] {
         assert!(matches!(
             complete(&meas, &cfg, &mut crate::NoopObserver),
@@ -152,6 +156,20 @@ fn ridge_continuation_and_creep_switch_end_unregularised() {
     };
     let c = complete(&meas, &cfg, &mut crate::NoopObserver).unwrap();
     assert!(c.rms < 1e-6, "rms {}", c.rms);
+}
+
+#[test]
+fn wiberg_with_and_without_geodesic_acceleration_fits_noise_free_scene() {
+    let meas = scene(8, 40, 7);
+    for geodesic_acceleration in [0.0, 0.75] {
+        let cfg = CompletionConfig {
+            geodesic_acceleration,
+            max_iterations: 200,
+            ..Default::default()
+        };
+        let c = complete(&meas, &cfg, &mut crate::NoopObserver).unwrap();
+        assert!(c.rms < 1e-6, "α = {geodesic_acceleration}: rms {}", c.rms);
+    }
 }
 
 #[test]
