@@ -196,23 +196,11 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         100.0 * t.fill()
     );
     let config = a.opts.config(a.camera);
-    let write = |r: &Reconstruction| rank3::output::write_all(r, &a.out);
-    // The output files are written while the result is being recorded.
     #[cfg(feature = "rerun")]
-    let (rec, written) = rank3::recording::reconstruct_recorded_then(
-        recording.as_ref(),
-        t,
-        &config,
-        &mut rank3::NoopObserver,
-        write,
-    )?;
+    let rec = rank3::recording::reconstruct_recorded(recording.as_ref(), t, &config)?;
     #[cfg(not(feature = "rerun"))]
-    let (rec, written) = {
-        let r = Reconstruction::from_tracks(t, &config)?;
-        let w = write(&r);
-        (r, w)
-    };
-    written?;
+    let rec = Reconstruction::from_tracks(t, &config)?;
+    rank3::output::write_all(&rec, &a.out)?;
     print_summary(&rec, &a.out);
     Ok(())
 }
@@ -694,28 +682,15 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
     let spinner = indicatif::ProgressBar::new_spinner()
         .with_style(bar_style("reconstructing {spinner} {elapsed} {msg}"));
     let mut obs = SpinnerObserver(spinner.clone());
-    let write = |r: &Reconstruction| {
-        spinner.finish_and_clear();
-        rank3::output::write_all(r, &a.out)
-    };
-    // The output files are written while the result is being recorded.
     #[cfg(feature = "rerun")]
-    let done = rank3::recording::reconstruct_recorded_then(
-        recording.as_ref(),
-        &table,
-        &config,
-        &mut obs,
-        write,
-    )
-    .map_err(rank3::Error::from);
+    let rec =
+        rank3::recording::reconstruct_recorded_with(recording.as_ref(), &table, &config, &mut obs)
+            .map_err(rank3::Error::from);
     #[cfg(not(feature = "rerun"))]
-    let done = Reconstruction::from_tracks_observed(&table, &config, &mut obs).map(|r| {
-        let w = write(&r);
-        (r, w)
-    });
+    let rec = Reconstruction::from_tracks_observed(&table, &config, &mut obs);
     spinner.finish_and_clear();
-    let (rec, written) = done?;
-    written?;
+    let rec = rec?;
+    rank3::output::write_all(&rec, &a.out)?;
     print_summary(&rec, &a.out);
     Ok(())
 }

@@ -154,9 +154,6 @@ pub enum RecordingError {
     /// Building an Arrow array for a bulk log call failed (an internal inconsistency).
     #[error("rerun recording: arrow: {0}")]
     Arrow(#[from] ArrowError),
-    /// A sink could not flush what was logged (e.g. the .rrd could not be written).
-    #[error("rerun recording: flush: {0}")]
-    Flush(#[from] rerun::sink::SinkFlushError),
 }
 
 impl From<rerun::SerializationError> for RecordingError {
@@ -177,9 +174,6 @@ impl From<RecordingError> for Error {
                 Error::io("rerun recording", std::io::Error::other(e.to_string()))
             }
             RecordingError::Arrow(e) => {
-                Error::io("rerun recording", std::io::Error::other(e.to_string()))
-            }
-            RecordingError::Flush(e) => {
                 Error::io("rerun recording", std::io::Error::other(e.to_string()))
             }
         }
@@ -289,80 +283,42 @@ pub fn reconstruct_recorded_with(
     config: &Config,
     extra: &mut dyn Observer,
 ) -> RecordingResult<Reconstruction> {
-    reconstruct_recorded_then(rec, table, config, extra, |_| ()).map(|(r, ())| r)
-}
-
-/// [`reconstruct_recorded_with`], and then `also(&result)` runs on the calling thread while
-/// the result is logged, and the sinks flushed, on a second thread (what the CLI does with
-/// its output files, so that the recording's share of the run overlaps other work). Without `rec`, `also` just
-/// runs after the pipeline. An error of the pipeline is logged and returned without
-/// running `also`.
-pub fn reconstruct_recorded_then<T>(
-    rec: Option<&RecordingStream>,
-    table: &TrackTable,
-    config: &Config,
-    extra: &mut dyn Observer,
-    also: impl FnOnce(&Reconstruction) -> T,
-) -> RecordingResult<(Reconstruction, T)> {
     let Some(rec) = rec else {
-        let result = Reconstruction::from_tracks_observed(table, config, extra)?;
-        let t = also(&result);
-        return Ok((result, t));
+        return Ok(Reconstruction::from_tracks_observed(table, config, extra)?);
     };
     log_input(rec, table)?;
     let mut observer = RecordingObserver::new(rec);
     let result =
         Reconstruction::from_tracks_observed(table, config, &mut crate::Both(&mut observer, extra));
     observer.flush();
-    let mut result = match result {
-        Ok(result) => result,
+    match result {
+        Ok(mut result) => {
+            if let (n @ 1.., Some(first)) = observer.errors() {
+                result
+                    .warnings
+                    .push(format!("recording: {n} log call(s) failed, first: {first}"));
+            }
+            log_reconstruction(rec, table, &result)?;
+            if let Some(r) = &result.robust {
+                let mut inliers = vec![false; table.n_tracks()];
+                for &p in &result.kept_tracks {
+                    inliers[p] = true;
+                }
+                log_robust(
+                    rec,
+                    table,
+                    &inliers,
+                    &r.flagged_indices,
+                    &r.inliers_per_iteration,
+                )?;
+            }
+            Ok(result)
+        }
         Err(e) => {
             log_error(rec, &e)?;
-            return Err(e.into());
+            Err(e.into())
         }
-    };
-    if let (n @ 1.., Some(first)) = observer.errors() {
-        result
-            .warnings
-            .push(format!("recording: {n} log call(s) failed, first: {first}"));
     }
-    let (logged, t) = std::thread::scope(|s| {
-        let logger = s.spawn(|| {
-            log_result(rec, table, &result)?;
-            rec.flush_blocking()?;
-            Ok::<(), RecordingError>(())
-        });
-        let t = also(&result);
-        let logged = logger
-            .join()
-            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-        (logged, t)
-    });
-    logged?;
-    Ok((result, t))
-}
-
-/// [`log_reconstruction`], then the robust pass's verdicts ([`log_robust`]) when it ran.
-fn log_result(
-    rec: &RecordingStream,
-    table: &TrackTable,
-    result: &Reconstruction,
-) -> RecordingResult {
-    log_reconstruction(rec, table, result)?;
-    if let Some(r) = &result.robust {
-        let mut inliers = vec![false; table.n_tracks()];
-        for &p in &result.kept_tracks {
-            inliers[p] = true;
-        }
-        log_robust(
-            rec,
-            table,
-            &inliers,
-            &r.flagged_indices,
-            &r.inliers_per_iteration,
-        )?;
-    }
-    Ok(())
 }
 
 /// The `stage`-timeline index of a named stage (see [`STAGES`]); `None` for unknown names.
