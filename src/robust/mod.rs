@@ -498,6 +498,18 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             if let Some(sg) = scale_of(&trimmed) {
                 sigma_e = sg;
             }
+            // Track `p`'s fit with its entries beyond `thr` set aside.
+            let fit = |p: usize, thr: f64| {
+                entry_fit(
+                    &est,
+                    &model,
+                    p,
+                    starts[p].as_ref(),
+                    thr,
+                    config.gross_entry_factor,
+                    config.max_flagged_fraction,
+                )
+            };
             let thr0 = config
                 .entry_threshold_px
                 .unwrap_or((entry_k * sigma_e).max(config.min_entry_threshold_px));
@@ -505,16 +517,7 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                 .into_par_iter()
                 .map(|p| {
                     if is_inl[p] {
-                        entry_fit(
-                            &est,
-                            &model,
-                            p,
-                            starts[p].as_ref(),
-                            thr0,
-                            config.gross_entry_factor,
-                            config.max_flagged_fraction,
-                        )
-                        .map(|f| f.s)
+                        fit(p, thr0).map(|f| f.s)
                     } else {
                         None
                     }
@@ -526,20 +529,8 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             let entry_thr = config
                 .entry_threshold_px
                 .unwrap_or((entry_k * sigma_e).max(config.min_entry_threshold_px));
-            let fits: Vec<Option<EntryFit>> = (0..n)
-                .into_par_iter()
-                .map(|p| {
-                    entry_fit(
-                        &est,
-                        &model,
-                        p,
-                        starts[p].as_ref(),
-                        entry_thr,
-                        config.gross_entry_factor,
-                        config.max_flagged_fraction,
-                    )
-                })
-                .collect();
+            let fits: Vec<Option<EntryFit>> =
+                (0..n).into_par_iter().map(|p| fit(p, entry_thr)).collect();
             (fits, entry_thr)
         };
         // χ²_ν(track_probability)/ν for ν = 2k − 3, k = 0..=F (computed once per round).
