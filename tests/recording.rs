@@ -7,6 +7,7 @@
 
 use std::collections::BTreeMap;
 use std::io::BufReader;
+use std::os::unix::process::CommandExt as _;
 use std::path::Path;
 
 use rank3::recording::{self, RecordingObserver, paths};
@@ -90,15 +91,21 @@ impl Contents {
 }
 
 fn read_rrd(path: &Path) -> Contents {
-    let file = std::fs::File::open(path).expect("open rrd");
+    try_read_rrd(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// [`read_rrd`], with a message instead of a panic when the file cannot be read or decoded
+/// (e.g. one still being written).
+fn try_read_rrd(path: &Path) -> Result<Contents, String> {
+    let file = std::fs::File::open(path).map_err(|e| format!("open: {e}"))?;
     let mut columns: BTreeMap<(String, String), Column> = BTreeMap::new();
     let mut chunks = Vec::new();
     for msg in DecoderApp::decode_lazy(BufReader::new(file)) {
-        let msg = msg.expect("the .rrd decodes");
+        let msg = msg.map_err(|e| format!("decode: {e}"))?;
         let LogMsg::ArrowMsg(_, arrow) = msg else {
             continue;
         };
-        let chunk = Chunk::from_arrow_msg(&arrow).expect("a valid chunk");
+        let chunk = Chunk::from_arrow_msg(&arrow).map_err(|e| format!("chunk: {e}"))?;
         let entity = chunk
             .entity_path()
             .to_string()
@@ -125,7 +132,7 @@ fn read_rrd(path: &Path) -> Contents {
         }
         chunks.push(chunk);
     }
-    Contents { columns, chunks }
+    Ok(Contents { columns, chunks })
 }
 
 /// A complete synthetic scene plus two stray tracks seen in one frame (set aside).
@@ -507,6 +514,7 @@ fn cli_connect_streams_to_a_rerun_server() {
         .env("RERUN_ANALYTICS", "0")
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
+        .process_group(0)
         .spawn()
         .unwrap();
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
@@ -534,23 +542,49 @@ fn cli_connect_streams_to_a_rerun_server() {
         "--connect",
         &format!("rerun+http://127.0.0.1:{port}/proxy"),
     ]);
-    // Ctrl-C ends the server, which closes the saved stream.
-    let _ = std::process::Command::new("kill")
-        .args(["-INT", &server.id().to_string()])
-        .status();
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
-    while server.try_wait().unwrap().is_none() {
-        if std::time::Instant::now() > deadline {
-            server.kill().ok();
-            panic!("the Rerun server did not stop on SIGINT");
+    // The server writes each message as it arrives: poll its file until everything checked
+    // below is there, then stop the server. (No Ctrl-C: the pip-installed `rerun` is a
+    // Python wrapper around the binary, and a background CI job may ignore SIGINT.)
+    let count = |c: &Contents, entity: &str, component: &str, rows: bool| {
+        c.columns
+            .get(&(entity.to_string(), component.to_string()))
+            .map(|col| if rows { col.rows() } else { col.total() })
+    };
+    let expected = [
+        (paths::TRACKS, "Points2D:positions", false, 6 * 20),
+        (paths::POINTS, "Points3D:positions", false, 20),
+        (paths::CAMERA, "Transform3D:mat3x3", true, 6),
+        (paths::SUMMARY, "TextDocument:text", true, 1),
+    ];
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let last = loop {
+        let state = try_read_rrd(&received).map(|c| {
+            expected
+                .iter()
+                .map(|&(e, comp, rows, _)| count(&c, e, comp, rows))
+                .collect::<Vec<_>>()
+        });
+        let done = state
+            .as_ref()
+            .is_ok_and(|got| got.iter().zip(&expected).all(|(g, e)| *g == Some(e.3)));
+        if done || std::time::Instant::now() > deadline {
+            break state;
         }
-        std::thread::sleep(std::time::Duration::from_millis(100));
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    };
+    // The whole process group: the wrapper and the server binary it started.
+    // SAFETY: kill(2) with a negative pid signals that process group (the server's own,
+    // from `process_group(0)`); no memory is involved.
+    unsafe {
+        libc::kill(-(server.id() as libc::pid_t), libc::SIGKILL);
     }
-    let got = read_rrd(&received);
-    assert_eq!(got.get(paths::TRACKS, "Points2D:positions").total(), 6 * 20);
-    assert_eq!(got.get(paths::POINTS, "Points3D:positions").total(), 20);
-    assert_eq!(got.get(paths::CAMERA, "Transform3D:mat3x3").rows(), 6);
-    assert_eq!(got.get(paths::SUMMARY, "TextDocument:text").rows(), 1);
+    let _ = server.wait();
+    let want: Vec<Option<usize>> = expected.iter().map(|e| Some(e.3)).collect();
+    assert_eq!(
+        last,
+        Ok(want),
+        "received vs expected (tracks, points, cameras, summary)"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
