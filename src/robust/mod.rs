@@ -107,8 +107,13 @@ pub struct RobustConfig {
     pub track_probability: f64,
     /// Refits of the flag → refit → re-classify loop at most. Default 5.
     pub max_gross_rounds: usize,
-    /// A track with more than this fraction of its entries flagged is an outlier track.
-    /// Default 0.3.
+    /// A track with more than this fraction of its entries flagged is an outlier track,
+    /// unless (once the flag → refit loop has settled) none of its flags is ambiguous (see
+    /// `gross_entry_factor`), at least 5 entries remain, and that many flags is plausible
+    /// for a good track: `P(X ≥ g) ≥ 1 − track_probability` for `X ~ Binomial(k, q̂)`, `g`
+    /// flags among its `k` entries, `q̂` the flagged fraction of the tracks within this
+    /// fraction. (A good track of 9 frames carries 3 gross entries with probability 0.008 at
+    /// a 5 % gross rate.) Default 0.3.
     pub max_flagged_fraction: f64,
     /// Flagged entries closer to their track's fit than `gross_entry_factor` times the entry
     /// threshold are *ambiguous*: an isolated glitch of a good track, or the worst frames
@@ -540,6 +545,19 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                 chi2_quantile(nu, config.track_probability) / nu
             })
             .collect();
+        // Gross-entry rate of the tracks that pass with at most `max_flagged_fraction`
+        // flagged.
+        let within = |fit: &EntryFit| {
+            fit.flagged.len() as f64 <= config.max_flagged_fraction * fit.seen as f64
+        };
+        let (n_flag, n_seen) = fits
+            .iter()
+            .flatten()
+            .filter(|f| within(f))
+            .fold((0usize, 0usize), |(a, b), f| {
+                (a + f.flagged.len(), b + f.seen)
+            });
+        let gross_rate = n_flag as f64 / n_seen.max(1) as f64;
         let mut new_flags = Vec::new();
         let mut new_inl = Vec::new();
         for (p, fit) in fits.iter().enumerate() {
@@ -567,9 +585,15 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                 Some(t) => t,
                 None => (sigma_e * chi2_ratio[k.min(nf)].sqrt()).max(config.min_track_threshold_px),
             };
-            if rms > limit
-                || fit.flagged.len() as f64 > config.max_flagged_fraction * fit.seen as f64
-            {
+            // A track over the fraction is kept when, once the model has settled, all its
+            // flags are clearly gross (none ambiguous), at least 5 entries remain for its χ²
+            // test, and that many gross entries is plausible at the observed rate.
+            let rescued = strict
+                && fit.ambiguous == 0
+                && fit.kept >= 5
+                && binomial_tail(fit.seen, fit.flagged.len(), gross_rate)
+                    >= 1.0 - config.track_probability;
+            if rms > limit || (!within(fit) && !rescued) {
                 continue;
             }
             new_inl.push(p);
@@ -887,6 +911,26 @@ fn entry_fit(
     }
 }
 
+/// `P(X ≥ g)` for `X ~ Binomial(k, q)`. O(g).
+fn binomial_tail(k: usize, g: usize, q: f64) -> f64 {
+    if g == 0 {
+        return 1.0;
+    }
+    if q <= 0.0 || g > k {
+        return 0.0;
+    }
+    if q >= 1.0 {
+        return 1.0;
+    }
+    let mut term = (1.0 - q).powi(k as i32);
+    let mut below = 0.0;
+    for i in 0..g {
+        below += term;
+        term *= (k - i) as f64 / (i + 1) as f64 * q / (1.0 - q);
+    }
+    (1.0 - below).max(0.0)
+}
+
 /// Pairs tried by [`entry_fit`]'s per-track RANSAC before it gives up on a track in which
 /// no pair explains half of the entries a passing track must keep.
 const PAIR_PRETEST: usize = 32;
@@ -1074,6 +1118,19 @@ mod tests {
         );
         assert!(symmetric_difference(&a, &a).is_empty());
         assert_eq!(symmetric_difference(&[], &b), b.to_vec());
+    }
+
+    #[test]
+    fn binomial_tail_matches_direct_sums() {
+        // P(X ≥ 3), X ~ Bin(9, 0.05) = 1 − Σ_{i<3} C(9,i) 0.05^i 0.95^(9−i) ≈ 0.00836.
+        let direct = 1.0
+            - (0.95f64.powi(9) + 9.0 * 0.05 * 0.95f64.powi(8) + 36.0 * 0.0025 * 0.95f64.powi(7));
+        assert!((binomial_tail(9, 3, 0.05) - direct).abs() < 1e-12);
+        assert!((direct - 0.00836).abs() < 5e-5);
+        assert_eq!(binomial_tail(9, 0, 0.05), 1.0);
+        assert_eq!(binomial_tail(9, 1, 0.0), 0.0);
+        assert_eq!(binomial_tail(3, 4, 0.5), 0.0);
+        assert!((binomial_tail(4, 1, 0.5) - 0.9375).abs() < 1e-12);
     }
 
     #[test]
