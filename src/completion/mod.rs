@@ -859,16 +859,32 @@ impl CompletionProblem {
     /// parameters, and the relative gradient `‖Jᵀr‖ / (‖w‖ ‖[S; 1]‖_F)` (`‖w‖` = norm of
     /// the observed data, so that zero-residual problems converge too).
     pub(crate) fn gradient(&self, ps: &PointSolve) -> (Vec<f64>, f64) {
+        let r = self.rank;
+        let g = self.jt_sbar(ps, &ps.res);
+        let s_norm2: f64 = (0..self.n_points)
+            .map(|p| {
+                let sp = &ps.s[p * r..(p + 1) * r];
+                sp.iter().map(|x| x * x).sum::<f64>() + if self.affine { 1.0 } else { 0.0 }
+            })
+            .sum();
+        let gn = g.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let denom = self.w_norm * s_norm2.sqrt();
+        let rel = if denom > 0.0 { gn / denom } else { 0.0 };
+        (g, rel)
+    }
+
+    /// `Σ_p v_p ⊗ s̄_p` for a residual-space vector `v` (two entries per observation, in
+    /// track order), `s̄_p = [s_p; 1]` (affine) or `s_p`: the camera-space image of `v`
+    /// under the transposed Jacobian's first term. O(observations · r).
+    pub(crate) fn jt_sbar(&self, ps: &PointSolve, v: &[f64]) -> Vec<f64> {
         let (q, r) = (self.q(), self.rank);
         let mut g = vec![0.0; 2 * self.n_frames * q];
-        let mut s_norm2 = 0.0;
         for p in 0..self.n_points {
             let sp = &ps.s[p * r..(p + 1) * r];
-            s_norm2 += sp.iter().map(|x| x * x).sum::<f64>() + if self.affine { 1.0 } else { 0.0 };
             for o in self.col_ptr[p]..self.col_ptr[p + 1] {
                 let f = self.col_frame[o];
                 for k in 0..2 {
-                    let e = ps.res[2 * o + k];
+                    let e = v[2 * o + k];
                     let gi = &mut g[(2 * f + k) * q..(2 * f + k + 1) * q];
                     for c in 0..r {
                         gi[c] += e * sp[c];
@@ -879,10 +895,7 @@ impl CompletionProblem {
                 }
             }
         }
-        let gn = g.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let denom = self.w_norm * s_norm2.sqrt();
-        let rel = if denom > 0.0 { gn / denom } else { 0.0 };
-        (g, rel)
+        g
     }
 
     /// Random start (Hong, Zach & Fitzgibbon 2017 protocol): `M` i.i.d. N(0, 1), `t = 0`.

@@ -720,7 +720,9 @@ impl CompletionSolver for Wiberg {
     }
 }
 
-/// Kaufman `Jᵀ v` for a residual-space vector `v`: `Σ_p (P_p v_p) ⊗ s̄_p`.
+/// Kaufman `Jᵀ v` for a residual-space vector `v`: `Σ_p (P_p v_p) ⊗ s̄_p`, i.e. `v`
+/// projected per track off `range(M̃_p)` (`P_p = I − M̃_p A_p⁻¹ M̃_pᵀ`), then
+/// [`CompletionProblem::jt_sbar`].
 fn kaufman_jt(
     problem: &CompletionProblem,
     u: &[f64],
@@ -728,7 +730,7 @@ fn kaufman_jt(
     v: &[f64],
 ) -> Vec<f64> {
     let (q, r) = (problem.q(), problem.rank);
-    let mut g = vec![0.0; 2 * problem.n_frames * q];
+    let mut pv = v.to_vec();
     let mut b = vec![0.0; r];
     let mut c = vec![0.0; r];
     for p in 0..problem.n_points {
@@ -747,23 +749,15 @@ fn kaufman_jt(
         for cc in 0..r {
             c[cc] = (0..r).map(|k| ainv[cc * r + k] * b[k]).sum();
         }
-        let sp = &ps.s[p * r..(p + 1) * r];
         for o in lo..hi {
             let f = problem.col_frame[o];
             for k in 0..2 {
-                let i = 2 * f + k;
-                let row = &u[i * q..i * q + r];
-                let pv = v[2 * o + k] - (0..r).map(|cc| row[cc] * c[cc]).sum::<f64>();
-                for cc in 0..r {
-                    g[i * q + cc] += pv * sp[cc];
-                }
-                if problem.affine {
-                    g[i * q + r] += pv;
-                }
+                let row = &u[(2 * f + k) * q..(2 * f + k) * q + r];
+                pv[2 * o + k] -= (0..r).map(|cc| row[cc] * c[cc]).sum::<f64>();
             }
         }
     }
-    g
+    problem.jt_sbar(ps, &pv)
 }
 
 /// Removes the gauge component of a step: with `M` orthonormal, `δM ← δM − M(MᵀδM)` and
