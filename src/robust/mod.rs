@@ -122,7 +122,8 @@ pub struct RobustConfig {
     /// flagged, but they also count in the track's χ² test (`r` and `k` include them); only
     /// entries beyond the factor are gross enough to be set aside from it. Default 2 (8.6
     /// σ_e at the default entry threshold). `f64::INFINITY` counts every flagged entry;
-    /// 1 counts none (the rule before this setting existed).
+    /// 1 counts none and skips the settled re-classification, so that no track over
+    /// `max_flagged_fraction` is kept either (the rules before these settings existed).
     pub gross_entry_factor: f64,
     /// Below this inlier fraction there is no rigid majority. Default 0.4.
     pub min_inlier_fraction: f64,
@@ -545,19 +546,23 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                 chi2_quantile(nu, config.track_probability) / nu
             })
             .collect();
-        // Gross-entry rate of the tracks that pass with at most `max_flagged_fraction`
-        // flagged.
         let within = |fit: &EntryFit| {
             fit.flagged.len() as f64 <= config.max_flagged_fraction * fit.seen as f64
         };
-        let (n_flag, n_seen) = fits
-            .iter()
-            .flatten()
-            .filter(|f| within(f))
-            .fold((0usize, 0usize), |(a, b), f| {
-                (a + f.flagged.len(), b + f.seen)
-            });
-        let gross_rate = n_flag as f64 / n_seen.max(1) as f64;
+        // Flagged fraction of the entries of the scorable tracks within
+        // `max_flagged_fraction` (only the settled classification uses it).
+        let gross_rate = if strict {
+            let (n_flag, n_seen) = fits
+                .iter()
+                .flatten()
+                .filter(|f| within(f))
+                .fold((0usize, 0usize), |(a, b), f| {
+                    (a + f.flagged.len(), b + f.seen)
+                });
+            n_flag as f64 / n_seen.max(1) as f64
+        } else {
+            0.0
+        };
         let mut new_flags = Vec::new();
         let mut new_inl = Vec::new();
         for (p, fit) in fits.iter().enumerate() {
