@@ -492,6 +492,51 @@ fn rerun_viewer_verifies_the_recording() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// What the small CLI run (`synth --frames 6 --points 20`, then `reconstruct`) must put in a
+/// recording: (entity, component, count rows instead of instances, count).
+const SMALL_RUN_EXPECTED: [(&str, &str, bool, usize); 4] = [
+    (paths::TRACKS, "Points2D:positions", false, 6 * 20),
+    (paths::POINTS, "Points3D:positions", false, 20),
+    (paths::CAMERA, "Transform3D:mat3x3", true, 6),
+    (paths::SUMMARY, "TextDocument:text", true, 1),
+];
+
+/// Polls `received`, the file a headless Rerun server saves what it receives to (it writes
+/// each message as it arrives), until it holds everything in [`SMALL_RUN_EXPECTED`] or 60 s
+/// have passed; then kills the server's process group `pgid` (the pip-installed `rerun` is a
+/// Python wrapper around the binary, and a background CI job may ignore SIGINT, so no
+/// Ctrl-C) and returns the counts found, in the order of [`SMALL_RUN_EXPECTED`].
+fn await_small_run(received: &Path, pgid: u32) -> Result<Vec<Option<usize>>, String> {
+    let count = |c: &Contents, entity: &str, component: &str, rows: bool| {
+        c.columns
+            .get(&(entity.to_string(), component.to_string()))
+            .map(|col| if rows { col.rows() } else { col.total() })
+    };
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let last = loop {
+        let state = try_read_rrd(received).map(|c| {
+            SMALL_RUN_EXPECTED
+                .iter()
+                .map(|&(e, comp, rows, _)| count(&c, e, comp, rows))
+                .collect::<Vec<_>>()
+        });
+        let done = state.as_ref().is_ok_and(|got| {
+            got.iter()
+                .zip(&SMALL_RUN_EXPECTED)
+                .all(|(g, e)| *g == Some(e.3))
+        });
+        if done || std::time::Instant::now() > deadline {
+            break state;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    };
+    // SAFETY: kill(2) with a negative pid signals that process group; no memory is involved.
+    unsafe {
+        libc::kill(-(pgid as libc::pid_t), libc::SIGKILL);
+    }
+    last
+}
+
 /// `rank3 reconstruct --connect URL` streams the recording to a running Rerun server: a
 /// headless `rerun --port P --save FILE` (the Rerun CLI 0.36.3, skipped without it) receives
 /// it and saves what arrived, which is then decoded and checked.
@@ -542,48 +587,100 @@ fn cli_connect_streams_to_a_rerun_server() {
         "--connect",
         &format!("rerun+http://127.0.0.1:{port}/proxy"),
     ]);
-    // The server writes each message as it arrives: poll its file until everything checked
-    // below is there, then stop the server. (No Ctrl-C: the pip-installed `rerun` is a
-    // Python wrapper around the binary, and a background CI job may ignore SIGINT.)
-    let count = |c: &Contents, entity: &str, component: &str, rows: bool| {
-        c.columns
-            .get(&(entity.to_string(), component.to_string()))
-            .map(|col| if rows { col.rows() } else { col.total() })
-    };
-    let expected = [
-        (paths::TRACKS, "Points2D:positions", false, 6 * 20),
-        (paths::POINTS, "Points3D:positions", false, 20),
-        (paths::CAMERA, "Transform3D:mat3x3", true, 6),
-        (paths::SUMMARY, "TextDocument:text", true, 1),
-    ];
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
-    let last = loop {
-        let state = try_read_rrd(&received).map(|c| {
-            expected
-                .iter()
-                .map(|&(e, comp, rows, _)| count(&c, e, comp, rows))
-                .collect::<Vec<_>>()
-        });
-        let done = state
-            .as_ref()
-            .is_ok_and(|got| got.iter().zip(&expected).all(|(g, e)| *g == Some(e.3)));
-        if done || std::time::Instant::now() > deadline {
-            break state;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(200));
-    };
-    // The whole process group: the wrapper and the server binary it started.
-    // SAFETY: kill(2) with a negative pid signals that process group (the server's own,
-    // from `process_group(0)`); no memory is involved.
-    unsafe {
-        libc::kill(-(server.id() as libc::pid_t), libc::SIGKILL);
-    }
+    let got = await_small_run(&received, server.id());
     let _ = server.wait();
-    let want: Vec<Option<usize>> = expected.iter().map(|e| Some(e.3)).collect();
     assert_eq!(
-        last,
-        Ok(want),
+        got,
+        Ok(SMALL_RUN_EXPECTED.iter().map(|e| Some(e.3)).collect()),
         "received vs expected (tracks, points, cameras, summary)"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `rank3 reconstruct --spawn` starts a viewer and streams the recording to it. The SDK
+/// spawns `rerun --port=9876 --memory-limit=… --expect-data-soon` from PATH; here PATH leads
+/// first to a stand-in script that runs the real Rerun CLI 0.36.3 (skipped without it) as a
+/// headless `rerun --port 9876 --save FILE` instead of a window, so the test checks what the
+/// spawned process received, not the viewer's drawing. Skipped, saying so, when port 9876
+/// is already taken (the SDK would then stream to whatever listens there).
+#[test]
+fn cli_spawn_streams_to_the_spawned_viewer() {
+    let Some(bin) = rerun_cli() else { return };
+    if std::net::TcpStream::connect(("127.0.0.1", 9876)).is_ok() {
+        eprintln!("SKIPPED: port 9876 is in use (a viewer is running?)");
+        return;
+    }
+    // The real CLI by absolute path: the stand-in below takes the name `rerun` on PATH.
+    let real = if bin.contains('/') {
+        bin
+    } else {
+        std::env::split_paths(&std::env::var_os("PATH").unwrap_or_default())
+            .map(|d| d.join(&bin))
+            .find(|p| p.is_file())
+            .expect("rerun_cli found it on PATH")
+            .display()
+            .to_string()
+    };
+    let dir = std::env::temp_dir().join(format!("rank3-recording-spawn-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let stand_in = dir.join("bin");
+    std::fs::create_dir_all(&stand_in).unwrap();
+    let d = dir.display().to_string();
+    let (received, pid_file) = (dir.join("received.rrd"), dir.join("viewer.pid"));
+    // Its own output goes to /dev/null: the spawned process would otherwise hold rank3's
+    // stdout/stderr pipes open, and `output()` would wait for it.
+    let script = stand_in.join("rerun");
+    std::fs::write(
+        &script,
+        r#"#!/bin/sh
+if [ "$1" = "--version" ]; then exec "$RANK3_TEST_RERUN" --version; fi
+port=
+for a in "$@"; do case "$a" in --port=*) port="${a#--port=}" ;; esac; done
+echo $$ > "$RANK3_TEST_PID.tmp" && mv "$RANK3_TEST_PID.tmp" "$RANK3_TEST_PID"
+exec "$RANK3_TEST_RERUN" --port "$port" --save "$RANK3_TEST_SAVE" >/dev/null 2>&1
+"#,
+    )
+    .unwrap();
+    std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    rank3_ok([
+        "synth",
+        "--out",
+        &format!("{d}/scene"),
+        "--frames",
+        "6",
+        "--points",
+        "20",
+    ]);
+    let mut path = vec![stand_in.clone()];
+    path.extend(std::env::split_paths(
+        &std::env::var_os("PATH").unwrap_or_default(),
+    ));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
+        .args(["reconstruct", &format!("{d}/scene/tracks.csv")])
+        .args(["--out", &format!("{d}/out"), "--spawn"])
+        .env("PATH", std::env::join_paths(path).unwrap())
+        .env("RANK3_TEST_RERUN", &real)
+        .env("RANK3_TEST_SAVE", &received)
+        .env("RANK3_TEST_PID", &pid_file)
+        .env("RERUN_ANALYTICS", "0")
+        .output()
+        .unwrap();
+    // The spawned process is its own session leader (the SDK detaches it), so its pid is
+    // its process group.
+    let pid: Option<u32> = std::fs::read_to_string(&pid_file)
+        .ok()
+        .and_then(|s| s.trim().parse().ok());
+    let got = pid.map(|pid| await_small_run(&received, pid));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        got,
+        Some(Ok(SMALL_RUN_EXPECTED.iter().map(|e| Some(e.3)).collect())),
+        "received by the spawned process vs expected (tracks, points, cameras, summary); None: \
+         nothing was spawned"
     );
     std::fs::remove_dir_all(&dir).ok();
 }
