@@ -41,7 +41,10 @@
 //!   frame (a frame is defined when ≥ 4 inliers with well-conditioned coordinates see it).
 //!   After every sweep, entries whose distance exceeds `sqrt(χ²₂(0.999)) · σ_e` with
 //!   `σ_e = median distance / sqrt(2 ln 2)` are given zero weight in the next sweep (hard
-//!   redescending reweighting), so gross entries do not pull the fit. The entries set
+//!   redescending reweighting), so gross entries do not pull the fit; except in a frame
+//!   where fewer than half of the entries pass, whose camera is then off rather than
+//!   its entries (cutting there would fit the camera exactly through the few entries it
+//!   passes near), so all its entries keep their weight for the next sweep. The entries set
 //!   aside by the last sweep are reported ([`TrackSubspace::refit_reporting`]) so the
 //!   caller can tell whether its own gross-entry flags agree with the fit. The S-step and
 //!   the distances are computed in parallel over tracks, the M-step's normal equations
@@ -659,11 +662,29 @@ impl TrackSubspace {
             let med = *d2all.select_nth_unstable_by(mid, |x, y| x.total_cmp(y)).1;
             let sigma_e = med.sqrt() / RAYLEIGH_MEDIAN;
             let cut2 = chi2_cut * sigma_e * sigma_e;
-            let mut cost = 0.0;
-            for (kp, d2) in keep.iter_mut().zip(&d2s) {
-                for (k, &d2) in kp.iter_mut().zip(d2) {
+            // Per frame: scored entries, and those within the cut. A frame whose camera
+            // is far off (a poor start where few tracks are seen) would keep only the few
+            // entries it happens to pass near, and the next M-step would fit the camera
+            // through them exactly (4 entries determine it), a fixed point with every
+            // other entry "gross". Inlier tracks agree with the true camera in most of
+            // their entries, so when fewer than half of a frame's entries pass, the cut is
+            // not applied there: the next M-step fits all of them (least squares, pulled
+            // only by the frame's few gross entries), and the cut applies again from it.
+            let (mut scored, mut within) = (vec![0usize; f], vec![0usize; f]);
+            for (j, &p) in inliers.iter().enumerate() {
+                for (&fr, &d2) in self.frames_of[p].iter().zip(&d2s[j]) {
                     if !d2.is_nan() {
-                        *k = d2 <= cut2 || cut2 == 0.0;
+                        scored[fr as usize] += 1;
+                        within[fr as usize] += usize::from(d2 <= cut2 || cut2 == 0.0);
+                    }
+                }
+            }
+            let cut_frame: Vec<bool> = (0..f).map(|fr| 2 * within[fr] >= scored[fr]).collect();
+            let mut cost = 0.0;
+            for (j, &p) in inliers.iter().enumerate() {
+                for ((k, &d2), &fr) in keep[j].iter_mut().zip(&d2s[j]).zip(&self.frames_of[p]) {
+                    if !d2.is_nan() {
+                        *k = d2 <= cut2 || cut2 == 0.0 || !cut_frame[fr as usize];
                         if *k {
                             cost += d2;
                         }
