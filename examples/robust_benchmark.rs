@@ -404,7 +404,7 @@ fn single(cfg: &RobustConfig, seed: u64) -> Result<(), Box<dyn std::error::Error
 fn pooled(cfg: &RobustConfig, first: u64, last: u64) -> Result<(), Box<dyn std::error::Error>> {
     println!("seeds {first}..={last}, flags pooled over the scenes with a rigid majority\n");
     println!(
-        "| outlier kind | outliers | gross | missing | no majority | track P | track R | det. R | undet. | entry P | entry R | entry P (inl.) | scenes with track P or det. R < 0.98 | struct err / clean, true inliers kept: median, max |"
+        "| outlier kind | outliers | gross | missing | no majority | track P | track R | det. R | undet. | entry P | entry R | entry P (inl.) | scenes with track P or det. R < 0.98 | struct err / clean, true inliers kept: median, max (its seed) |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for cell in grid() {
@@ -431,13 +431,13 @@ fn pooled(cfg: &RobustConfig, first: u64, last: u64) -> Result<(), Box<dyn std::
             if t.precision.min(pr(c.det_tp, 0, c.detectable).recall) < 0.98 {
                 below += 1;
             }
-            ratios.push(c.ratio_true);
+            ratios.push((c.ratio_true, seed));
         }
         let n = last - first + 1;
         let cells = if ratios.is_empty() {
             vec!["–".to_string(); 7]
         } else {
-            ratios.sort_by(f64::total_cmp);
+            ratios.sort_by(|a, b| a.0.total_cmp(&b.0));
             let t = pr(tp, flagged, actual);
             let e = pr(etp, ef, eg);
             let ei = pr(etp, ef_inl, eg);
@@ -461,11 +461,8 @@ fn pooled(cfg: &RobustConfig, first: u64, last: u64) -> Result<(), Box<dyn std::
         let structure = if ratios.is_empty() {
             "–".to_string()
         } else {
-            format!(
-                "{:.2}, {:.2}",
-                ratios[ratios.len() / 2],
-                ratios[ratios.len() - 1]
-            )
+            let (max, worst) = ratios[ratios.len() - 1];
+            format!("{:.2}, {max:.2} (seed {worst})", ratios[ratios.len() / 2].0)
         };
         println!(
             "| {} | {:.0} % | {:.0} % | {:.1} | {none}/{n} | {} | {below}/{} | {structure} |",

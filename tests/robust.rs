@@ -183,7 +183,8 @@ fn clean_scene_keeps_nearly_every_track() {
         assert!(r.verdict.is_rigid_majority());
         let kept = r.n_inliers();
         assert!(kept >= 99, "missing {missing}: kept {kept} of 100");
-        // The entry test's false-alarm rate is 1e-4 for Gaussian noise with an exact model;
+        // The entry test's false-alarm rate is at most 1e-4 for Gaussian noise with an exact
+        // model (0.1 / #entries here);
         // with missing data the affine model is estimated from fewer tracks per frame and
         // its error adds to the residuals: allow 0.5 % of the entries.
         let obs = s.table.n_observed() as f64;
@@ -193,6 +194,46 @@ fn clean_scene_keeps_nearly_every_track() {
             r.flagged_entries.len()
         );
     }
+}
+
+/// The estimated entry threshold grows with the table (`entry_false_alarms`, a Bonferroni
+/// correction), so a clean 40 × 1500 table (60 000 entries) has about 0.1 false entry
+/// flags instead of the 6 the fixed per-entry probability 0.9999 would give.
+#[test]
+fn false_entry_flags_do_not_grow_with_the_table() {
+    let s = generate(&SynthConfig {
+        frames: 40,
+        points: 1500,
+        seed: 12,
+        ..Default::default()
+    })
+    .unwrap();
+    let n = s.table.n_observed() as f64;
+    let r = run(&s, 4);
+    assert!(r.verdict.is_rigid_majority());
+    let k = (-2.0 * (0.1 / n).ln()).sqrt();
+    assert!(
+        (r.entry_threshold_px - k * r.noise_sigma).abs() <= 1e-9 * r.entry_threshold_px,
+        "threshold {} px, σ̂ {} px, expected {k:.3} σ̂",
+        r.entry_threshold_px,
+        r.noise_sigma
+    );
+    assert!(
+        r.flagged_entries.len() <= 2,
+        "{} of {n} good entries flagged at {k:.2} σ̂",
+        r.flagged_entries.len()
+    );
+    // `entry_false_alarms = ∞` is the fixed per-entry probability alone.
+    let fixed = run_cfg(
+        &s,
+        4,
+        &RobustConfig {
+            entry_false_alarms: f64::INFINITY,
+            ..RobustConfig::default()
+        },
+    );
+    let k0 = (-2.0 * (1e-4f64).ln()).sqrt();
+    assert!((fixed.entry_threshold_px - k0 * fixed.noise_sigma).abs() <= 1e-9 * k0);
 }
 
 #[test]

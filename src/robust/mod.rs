@@ -19,8 +19,10 @@
 //!    [`TrackSubspace::refit_warm_reporting`]); the entry noise `σ_e` is the median entry
 //!    distance / sqrt(2 ln 2) (each distance scaled by `1/sqrt(1 − 3/(2k))` for the
 //!    track's 3 fitted coordinates); entries
-//!    farther than `entry_threshold_px` (default `sqrt(χ²₂(entry_probability)) · σ_e`,
-//!    4.29 σ_e for p = 0.9999) from their track's fit are flagged (each track is refitted on
+//!    farther than `entry_threshold_px` (default `sqrt(χ²₂(p)) · σ_e`, `p` the larger of
+//!    `entry_probability` = 0.9999 (4.29 σ_e) and `1 − entry_false_alarms / n` for `n`
+//!    observed entries (Bonferroni: 0.1 false flags expected per table, 4.65 σ_e for
+//!    5 000 entries)) from their track's fit are flagged (each track is refitted on
 //!    its entries within the threshold; when more than `max_flagged_fraction` would be
 //!    flagged, a per-track RANSAC over frame pairs looks for a better start; it gives up
 //!    early on tracks where no pair explains half the entries a passing track keeps). A
@@ -98,8 +100,22 @@ pub struct RobustConfig {
     /// affine optimum has median 0.5, 95th percentile 1.5, 99th 3.0 px). Ignored when
     /// `ransac.threshold_px` is given.
     pub min_track_threshold_px: f64,
-    /// Probability that a good entry is below the estimated entry threshold. Default 0.9999.
+    /// Probability that a good entry is below the estimated entry threshold, at least.
+    /// Default 0.9999 (4.29 σ_e). On tables of more than `entry_false_alarms / (1 −
+    /// entry_probability)` entries (1000 with the defaults) the threshold is raised so that
+    /// the expected number of good entries flagged stays `entry_false_alarms`.
     pub entry_probability: f64,
+    /// Expected number of good entries flagged in the whole table by the estimated entry
+    /// threshold, for Gaussian noise of the estimated σ_e: the per-entry probability is
+    /// `max(entry_probability, 1 − entry_false_alarms / n)` for `n` observed entries (a
+    /// Bonferroni correction: one test per entry, `n` tests). Without it the false flags
+    /// grow with the table (at 0.9999, 0.5 per 5 000 entries, 20 per 200 000), and at a low
+    /// gross-error rate they are a large share of all flags. The threshold is then 4.65 σ_e
+    /// for 5 000 entries and 5.39 σ_e for 200 000 with the default 0.1; a glitch below it
+    /// is as large as the largest Gaussian errors the table is expected to hold anyway.
+    /// Default 0.1; `f64::INFINITY` uses `entry_probability` alone. Ignored when
+    /// `entry_threshold_px` is given.
+    pub entry_false_alarms: f64,
     /// Final per-track test (after the refit, with the entry-level `σ`): a track whose
     /// unflagged entries have RMS `r` over `k` frames is an inlier when
     /// `r ≤ σ sqrt(χ²_ν(track_probability)/ν)`, `ν = 2k − 3` (or `r ≤ threshold_px` when the
@@ -121,7 +137,7 @@ pub struct RobustConfig {
     /// another object) and would otherwise pass its test by shedding them. They stay
     /// flagged, but they also count in the track's χ² test (`r` and `k` include them); only
     /// entries beyond the factor are gross enough to be set aside from it. Default 2 (8.6
-    /// σ_e at the default entry threshold). `f64::INFINITY` counts every flagged entry;
+    /// σ_e at an entry threshold of 4.29 σ_e). `f64::INFINITY` counts every flagged entry;
     /// 1 counts none and skips the settled re-classification, so that no track over
     /// `max_flagged_fraction` is kept either (the rules before these settings existed).
     pub gross_entry_factor: f64,
@@ -151,6 +167,7 @@ impl Default for RobustConfig {
             min_entry_threshold_px: 0.0,
             min_track_threshold_px: 0.0,
             entry_probability: 0.9999,
+            entry_false_alarms: 0.1,
             track_probability: 0.9999,
             max_gross_rounds: 5,
             max_flagged_fraction: 0.3,
@@ -205,6 +222,12 @@ impl RobustConfig {
             return bad(
                 "entry_probability",
                 format!("{} is not in (0.5, 1)", self.entry_probability),
+            );
+        }
+        if !(self.entry_false_alarms > 0.0) {
+            return bad(
+                "entry_false_alarms",
+                format!("{} is not positive", self.entry_false_alarms),
             );
         }
         if !(self.track_probability > 0.5 && self.track_probability < 1.0) {
@@ -446,7 +469,13 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
     // Ambiguous flags count in the track test only once the model has settled: while it
     // is still off in some frame, good tracks have moderate distances there.
     let mut strict = false;
-    let entry_k = chi2_quantile(2.0, config.entry_probability).sqrt();
+    let entry_k = chi2_quantile(
+        2.0,
+        config
+            .entry_probability
+            .max(1.0 - config.entry_false_alarms / meas.n_observed().max(1) as f64),
+    )
+    .sqrt();
     // Noise floor for noise-free input (keeps thresholds positive).
     let floor = 1e-9 * meas.w.norm_max().max(1.0);
     // The fits of the last round, kept for the re-classification once settled.
