@@ -428,39 +428,46 @@ fn unusable_input_is_a_typed_error() {
     ));
 }
 
-/// No frame's camera collapses onto a few of its entries. In this scene (the benchmark's
-/// 30 × 300 mixed-outlier scene with 30 % outlier tracks, 1 % gross entries, 40 % missing,
-/// seed 101) the last frame is seen by 37 tracks; its camera started poorly, ALS's
-/// reweighting cut kept only the 4 entries it passed near and fitted it exactly through
-/// them, and 22 of the frame's 26 good entries were then flagged as gross (structure error
-/// 134× clean). ALS now skips the cut in a frame where fewer than half of the entries pass.
+/// No frame's camera stays off with its good entries flagged. Two held-out scenes of the
+/// benchmark's kind (30 × 300, mixed outliers 30 %, 1 % gross entries, 40 % missing):
+/// * seed 101: the last frame, seen by 37 tracks, started poorly; ALS's reweighting cut kept
+///   only the 4 entries its camera passed near and fitted it exactly through them, and 22
+///   of the frame's 26 good entries were flagged (structure error 134× clean). ALS now skips
+///   the cut in a frame where fewer than half of the entries pass.
+/// * seed 216: the first frame's camera was still off after the first refit (ALS converges
+///   slowly where few tracks link a frame to the rest); 18 of its 29 good entries were
+///   flagged and the refits, which set flagged entries aside, kept it off. A frame with more
+///   than `max_flagged_fraction` of its entries flagged now has its camera re-estimated from
+///   the tracks' own coordinates (resection) and its flags re-examined.
 #[test]
-fn no_frame_collapses_onto_a_few_entries() {
-    let s = generate(&SynthConfig {
-        frames: 30,
-        points: 300,
-        outliers: 0.3,
-        outlier_kind: OutlierKind::Mixed,
-        gross: 0.01,
-        missing: 0.4,
-        min_track_length: 6,
-        seed: 101,
-        ..Default::default()
-    })
-    .unwrap();
-    let r = run(&s, 1);
-    assert!(r.verdict.is_rigid_majority());
-    let gross: HashSet<(usize, usize)> = s.gross_entries.iter().copied().collect();
-    let mut false_flags = vec![0usize; s.table.n_frames()];
-    for &(f, p) in &r.flagged_entries {
-        if s.outlier_tracks[p].is_none() && !gross.contains(&(f, p)) {
-            false_flags[f] += 1;
+fn no_frame_keeps_an_off_camera_with_its_entries_flagged() {
+    for seed in [101, 216] {
+        let s = generate(&SynthConfig {
+            frames: 30,
+            points: 300,
+            outliers: 0.3,
+            outlier_kind: OutlierKind::Mixed,
+            gross: 0.01,
+            missing: 0.4,
+            min_track_length: 6,
+            seed,
+            ..Default::default()
+        })
+        .unwrap();
+        let r = run(&s, 1);
+        assert!(r.verdict.is_rigid_majority());
+        let gross: HashSet<(usize, usize)> = s.gross_entries.iter().copied().collect();
+        let mut false_flags = vec![0usize; s.table.n_frames()];
+        for &(f, p) in &r.flagged_entries {
+            if s.outlier_tracks[p].is_none() && !gross.contains(&(f, p)) {
+                false_flags[f] += 1;
+            }
         }
+        // About 0.1 false flags are expected in the whole table (`entry_false_alarms`);
+        // a frame whose camera is off has tens.
+        assert!(
+            false_flags.iter().all(|&c| c <= 2),
+            "seed {seed}: false entry flags per frame: {false_flags:?}"
+        );
     }
-    // At the 4.29 σ entry threshold a good entry is flagged with probability 1e-4: even one
-    // false flag per frame is unlikely here; a collapsed frame has tens.
-    assert!(
-        false_flags.iter().all(|&c| c <= 2),
-        "false entry flags per frame: {false_flags:?}"
-    );
 }

@@ -38,7 +38,11 @@
 //!    again) would move no frame's fit by more than 0.02 σ_e (per frame, the sum of their
 //!    distances over the number of entries fitted there). The refit's own
 //!    reweighting already sets aside gross entries, so on typical data the first
-//!    classification is final and no refit is needed.
+//!    classification is final and no refit is needed. A frame with more than
+//!    `max_flagged_fraction` of its inlier entries flagged (at least 3) has a camera that
+//!    is off, not that many gross entries: before the refit its camera is re-estimated
+//!    from its entries and the tracks' fitted coordinates (resection),
+//!    and its flags are not set aside from the refit.
 //! 4. **Verdict**: a rigid majority exists when the inlier fraction is at least
 //!    `min_inlier_fraction` and no *rival* rigid group (a second RANSAC over the rejected
 //!    tracks, same threshold) has at least `max_rival_ratio` times as many tracks. Otherwise
@@ -643,7 +647,21 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             .into_iter()
             .filter(|e| als_excluded.binary_search(e).is_err())
             .collect();
-        let converged = new_inl == inl
+        // Frames where more than `max_flagged_fraction` of the inlier tracks' entries are
+        // flagged: their camera is off, not their entries (see [`suspect_frames`]).
+        let suspect = if strict {
+            Vec::new()
+        } else {
+            suspect_frames(
+                &cur,
+                &model,
+                &new_inl,
+                &new_flags,
+                config.max_flagged_fraction,
+            )
+        };
+        let converged = suspect.is_empty()
+            && new_inl == inl
             && refit_shift_small(
                 &est,
                 &model,
@@ -666,12 +684,22 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             break (fits, entry_thr);
         }
         rounds += 1;
-        cur = TrackSubspace::with_exclusions(meas, &config.subspace, &flagged);
+        // A suspect frame's camera is re-estimated from its entries and the tracks' own
+        // coordinates, and its flags are not set aside from the refit.
+        for &f in &suspect {
+            resect_frame(meas, &mut model, f, &inl, &fits, entry_thr);
+        }
+        let exclude: Vec<(usize, usize)> = flagged
+            .iter()
+            .filter(|e| suspect.binary_search(&e.0).is_err())
+            .copied()
+            .collect();
+        cur = TrackSubspace::with_exclusions(meas, &config.subspace, &exclude);
         if let Some((m, excluded)) =
             cur.refit_reporting(&model, &inl, config.subspace.final_als_iterations)
         {
             model = m;
-            fit_flags = flagged.clone();
+            fit_flags = exclude;
             als_excluded = excluded;
         }
     };
@@ -796,6 +824,104 @@ impl EntryFit {
             ((self.ss + self.ambiguous_ss) / ((2 * k) as f64 - 3.0)).sqrt(),
             k,
         )
+    }
+}
+
+/// Frames (sorted) where more than `max_fraction` of the entries of the tracks `inl`, and
+/// at least 3, are among `flags` (sorted (frame, track) pairs).
+///
+/// Gross entries are rare and independent of the frame, so a frame with a large share of
+/// them has a camera that is off rather than entries: a camera poorly determined by the
+/// start (few tracks see the frame, at the ends of a sequence with missing data) leaves
+/// good entries far from it, and setting them aside in the refit would keep it off. The
+/// same bound as for a track's share of flags. O(Σ_inl k + #flags).
+fn suspect_frames(
+    est: &TrackSubspace,
+    model: &AffineSubspace,
+    inl: &[usize],
+    flags: &[(usize, usize)],
+    max_fraction: f64,
+) -> Vec<usize> {
+    let nf = model.n_frames;
+    let mut entries = vec![0usize; nf];
+    for &p in inl {
+        for &f in est.frames_of(p) {
+            if model.defined[f as usize] {
+                entries[f as usize] += 1;
+            }
+        }
+    }
+    let mut flagged = vec![0usize; nf];
+    for &(f, p) in flags {
+        if inl.binary_search(&p).is_ok() {
+            flagged[f] += 1;
+        }
+    }
+    (0..nf)
+        .filter(|&f| flagged[f] >= 3 && flagged[f] as f64 > max_fraction * entries[f] as f64)
+        .collect()
+}
+
+/// Re-estimates frame `f`'s camera `[M_f | t_f]` (camera resection) from the entries of
+/// the tracks `inl` seen there, each at its coordinates from its entry fit (which set
+/// aside the entries it flagged, so they come from the track's other frames): least
+/// squares `min Σ_p ‖w_fp − M_f s_p − t_f‖²` over all of them, then twice over those
+/// within `thr` of the current fit. Unchanged when fewer than 5 entries remain or the
+/// coordinates are degenerate. O(#entries in the frame).
+fn resect_frame(
+    meas: &Measurements,
+    model: &mut AffineSubspace,
+    f: usize,
+    inl: &[usize],
+    fits: &[Option<EntryFit>],
+    thr: f64,
+) {
+    use nalgebra::{Matrix4, Vector4};
+    let n = meas.n_points();
+    let obs: Vec<(Vector4<f64>, f64, f64)> = inl
+        .iter()
+        .filter(|&&p| meas.visible[f * n + p])
+        .filter_map(|&p| {
+            let s = fits[p].as_ref()?.s;
+            Some((
+                Vector4::new(s[0], s[1], s[2], 1.0),
+                meas.w[(2 * f, p)],
+                meas.w[(2 * f + 1, p)],
+            ))
+        })
+        .collect();
+    let mut keep = vec![true; obs.len()];
+    for round in 0..3 {
+        let (mut a, mut bx, mut by, mut cnt) = (
+            Matrix4::<f64>::zeros(),
+            Vector4::zeros(),
+            Vector4::zeros(),
+            0,
+        );
+        for ((v, x, y), _) in obs.iter().zip(&keep).filter(|(_, k)| **k) {
+            a += v * v.transpose();
+            bx += v * *x;
+            by += v * *y;
+            cnt += 1;
+        }
+        if cnt < 5 {
+            return;
+        }
+        let e = a.symmetric_eigenvalues();
+        if !(e.min() > 1e-10 * e.max()) {
+            return;
+        }
+        let Some(c) = a.cholesky() else { return };
+        let (mx, my) = (c.solve(&bx), c.solve(&by));
+        for (row, v) in [(2 * f, mx), (2 * f + 1, my)] {
+            model.m[3 * row..3 * row + 3].copy_from_slice(&[v[0], v[1], v[2]]);
+            model.t[row] = v[3];
+        }
+        if round < 2 {
+            for ((v, x, y), k) in obs.iter().zip(keep.iter_mut()) {
+                *k = (mx.dot(v) - x).powi(2) + (my.dot(v) - y).powi(2) <= thr * thr;
+            }
+        }
     }
 }
 
