@@ -653,7 +653,7 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             Vec::new()
         } else {
             suspect_frames(
-                &cur,
+                &est,
                 &model,
                 &new_inl,
                 &new_flags,
