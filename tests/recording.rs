@@ -492,6 +492,20 @@ fn rerun_viewer_verifies_the_recording() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `rank3 synth --frames 6 --points 20` into `{dir}/scene`: the scene of the small CLI run
+/// ([`SMALL_RUN_EXPECTED`]).
+fn synth_small_run_scene(dir: &str) {
+    rank3_ok([
+        "synth",
+        "--out",
+        &format!("{dir}/scene"),
+        "--frames",
+        "6",
+        "--points",
+        "20",
+    ]);
+}
+
 /// What the small CLI run (`synth --frames 6 --points 20`, then `reconstruct`) must put in a
 /// recording: (entity, component, count rows instead of instances, count).
 const SMALL_RUN_EXPECTED: [(&str, &str, bool, usize); 4] = [
@@ -570,15 +584,7 @@ fn cli_connect_streams_to_a_rerun_server() {
         );
         std::thread::sleep(std::time::Duration::from_millis(100));
     }
-    rank3_ok([
-        "synth",
-        "--out",
-        &format!("{d}/scene"),
-        "--frames",
-        "6",
-        "--points",
-        "20",
-    ]);
+    synth_small_run_scene(&d);
     rank3_ok([
         "reconstruct",
         &format!("{d}/scene/tracks.csv"),
@@ -642,15 +648,7 @@ exec "$RANK3_TEST_RERUN" --port "$port" --save "$RANK3_TEST_SAVE" >/dev/null 2>&
     )
     .unwrap();
     std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
-    rank3_ok([
-        "synth",
-        "--out",
-        &format!("{d}/scene"),
-        "--frames",
-        "6",
-        "--points",
-        "20",
-    ]);
+    synth_small_run_scene(&d);
     let mut path = vec![stand_in.clone()];
     path.extend(std::env::split_paths(
         &std::env::var_os("PATH").unwrap_or_default(),
