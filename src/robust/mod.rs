@@ -45,9 +45,9 @@
 //!    and its flags are not set aside from the refit.
 //! 4. **Verdict**: a rigid majority exists when the inlier fraction is at least
 //!    `min_inlier_fraction` and no *rival* rigid group (a second RANSAC over the rejected
-//!    tracks, same threshold, `rival_max_iterations` hypotheses) has at least `max_rival_ratio` times as many tracks. Otherwise
-//!    [`Verdict::NoRigidMajority`] is returned with the numbers, and no model or inlier set
-//!    is claimed.
+//!    tracks, same threshold, `rival_max_iterations` hypotheses) has at least
+//!    `max_rival_ratio` times as many tracks. Otherwise [`Verdict::NoRigidMajority`] is
+//!    returned with the numbers, and no model or inlier set is claimed.
 //!
 //! References: M. A. Fischler and R. C. Bolles, "Random sample consensus", CACM 24(6),
 //! 1981; P. H. S. Torr and A. Zisserman, "MLESAC: a new robust estimator with application
@@ -62,9 +62,10 @@
 //! affine refits (O(#observations) per ALS sweep, warm-started from the RANSAC model; the
 //! local-optimization refits on at most `ransac.lo_max_inliers` tracks), plus per
 //! classification round O(#observations) for the track fits and O(32·k) per rejected track
-//! for the per-track frame-pair search (O(k²) for tracks it can rescue), plus the rival
-//! search (same order, on the rejected tracks only, and only when they are numerous enough
-//! to matter).
+//! for the per-track frame-pair search (O(k²) for tracks it can rescue) and O(#entries of
+//! the frame) per suspect frame's resection, plus the rival search (`rival_max_iterations`
+//! hypotheses on the rejected tracks only, and only when they are numerous enough to
+//! matter).
 
 // `!(x > y)` is used on purpose: it is true for NaN, which must take the safe branch.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
