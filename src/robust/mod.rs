@@ -833,7 +833,7 @@ impl EntryFit {
 }
 
 /// Frames (sorted) where more than `max_fraction` of the entries of the tracks `inl`, and
-/// at least 3, are among `flags` (sorted (frame, track) pairs).
+/// at least 3, are among `flags` (the flagged (frame, track) entries of those tracks).
 ///
 /// Gross entries are rare and independent of the frame, so a frame with a large share of
 /// them has a camera that is off rather than entries: a camera poorly determined by the
@@ -857,10 +857,8 @@ fn suspect_frames(
         }
     }
     let mut flagged = vec![0usize; nf];
-    for &(f, p) in flags {
-        if inl.binary_search(&p).is_ok() {
-            flagged[f] += 1;
-        }
+    for &(f, _) in flags {
+        flagged[f] += 1;
     }
     (0..nf)
         .filter(|&f| flagged[f] >= 3 && flagged[f] as f64 > max_fraction * entries[f] as f64)
@@ -912,16 +910,10 @@ fn resect_frame(
         if cnt < 5 {
             return;
         }
-        let e = a.symmetric_eigenvalues();
-        if !(e.min() > 1e-10 * e.max()) {
+        let Some((mx, my)) = subspace::solve_camera(&a, &bx, &by) else {
             return;
-        }
-        let Some(c) = a.cholesky() else { return };
-        let (mx, my) = (c.solve(&bx), c.solve(&by));
-        for (row, v) in [(2 * f, mx), (2 * f + 1, my)] {
-            model.m[3 * row..3 * row + 3].copy_from_slice(&[v[0], v[1], v[2]]);
-            model.t[row] = v[3];
-        }
+        };
+        model.set_camera(f, &mx, &my);
         if round < 2 {
             for ((v, x, y), k) in obs.iter().zip(keep.iter_mut()) {
                 *k = (mx.dot(v) - x).powi(2) + (my.dot(v) - y).powi(2) <= thr * thr;

@@ -129,6 +129,32 @@ impl AffineSubspace {
     pub fn motion(&self) -> Mat<f64> {
         Mat::from_fn(2 * self.n_frames, 3, |r, k| self.m[3 * r + k])
     }
+
+    /// Sets frame `f`'s camera: its x row to `x = [m_x; t_x]`, its y row to `y`, and marks
+    /// the frame defined.
+    pub(crate) fn set_camera(&mut self, f: usize, x: &Vector4<f64>, y: &Vector4<f64>) {
+        for (row, v) in [(2 * f, x), (2 * f + 1, y)] {
+            self.m[3 * row..3 * row + 3].copy_from_slice(&[v[0], v[1], v[2]]);
+            self.t[row] = v[3];
+        }
+        self.defined[f] = true;
+    }
+}
+
+/// One frame's least-squares camera from its normal equations `A = Σ v vᵀ`, `b_x = Σ v x`,
+/// `b_y = Σ v y` over its entries (`v = [s_p; 1]`, `(x, y)` the observation): the rows
+/// `([m_x; t_x], [m_y; t_y])`, or `None` when `A` is ill-conditioned (smallest eigenvalue
+/// not above 1e-10 × the largest) or not positive definite. O(1).
+pub(crate) fn solve_camera(
+    a: &Matrix4<f64>,
+    bx: &Vector4<f64>,
+    by: &Vector4<f64>,
+) -> Option<(Vector4<f64>, Vector4<f64>)> {
+    let e = a.symmetric_eigenvalues();
+    if !(e.min() > 1e-10 * e.max()) {
+        return None;
+    }
+    a.cholesky().map(|c| (c.solve(bx), c.solve(by)))
 }
 
 /// Robust least-squares fit of one track to a model.
@@ -608,27 +634,13 @@ impl TrackSubspace {
                     acc
                 })?;
             for fr in 0..f {
-                let ok = cnt[fr] >= 4 && {
-                    let e = a[fr].symmetric_eigenvalues();
-                    e.min() > 1e-10 * e.max()
-                };
-                let sol = if ok {
-                    a[fr]
-                        .cholesky()
-                        .map(|c| (c.solve(&bx[fr]), c.solve(&by[fr])))
+                let sol = if cnt[fr] >= 4 {
+                    solve_camera(&a[fr], &bx[fr], &by[fr])
                 } else {
                     None
                 };
                 match sol {
-                    Some((x, y)) => {
-                        for (row, v) in [(2 * fr, x), (2 * fr + 1, y)] {
-                            model.m[3 * row] = v[0];
-                            model.m[3 * row + 1] = v[1];
-                            model.m[3 * row + 2] = v[2];
-                            model.t[row] = v[3];
-                        }
-                        model.defined[fr] = true;
-                    }
+                    Some((x, y)) => model.set_camera(fr, &x, &y),
                     None => {
                         model.defined[fr] = false;
                         for row in [2 * fr, 2 * fr + 1] {
