@@ -112,14 +112,14 @@ fn outlier_tracks_of_each_kind_are_rejected(missing: f64) {
     }
 }
 
-/// A scene of `robust_benchmark`'s size: 30 frames × 300 tracks, 40 % missing, 5 % gross.
-fn benchmark_scene(kind: OutlierKind, outliers: f64, seed: u64) -> SynthScene {
+/// A scene of `robust_benchmark`'s size: 30 frames × 300 tracks, 40 % missing.
+fn benchmark_scene(kind: OutlierKind, outliers: f64, gross: f64, seed: u64) -> SynthScene {
     generate(&SynthConfig {
         frames: 30,
         points: 300,
         outliers,
         outlier_kind: kind,
-        gross: 0.05,
+        gross,
         missing: 0.4,
         min_track_length: 6,
         seed,
@@ -137,7 +137,7 @@ fn benchmark_scene(kind: OutlierKind, outliers: f64, seed: u64) -> SynthScene {
 #[test]
 fn drifting_tracks_cannot_hide_behind_entry_flags() {
     for (kind, seed) in [(OutlierKind::SecondObject, 1), (OutlierKind::Mixed, 2)] {
-        let s = benchmark_scene(kind, 0.3, seed);
+        let s = benchmark_scene(kind, 0.3, 0.05, seed);
         let r = run(&s, 1);
         let (p, rc) = track_pr(&s, &r);
         // 90 outlier tracks: 0.95 allows 4 misses, a few of which (short windows) are
@@ -157,7 +157,7 @@ fn drifting_tracks_cannot_hide_behind_entry_flags() {
 #[test]
 fn short_good_tracks_with_several_gross_entries_are_kept() {
     for (kind, seed) in [(OutlierKind::RandomWalk, 11), (OutlierKind::Sliding, 2)] {
-        let s = benchmark_scene(kind, 0.1, seed);
+        let s = benchmark_scene(kind, 0.1, 0.05, seed);
         let r = run(&s, 1);
         let (p, rc) = track_pr(&s, &r);
         assert!(
@@ -349,18 +349,7 @@ fn no_rigid_majority_is_reported_not_hidden() {
 /// claimed as the rigid majority.
 #[test]
 fn two_equal_objects_with_missing_data_are_no_majority() {
-    let s = generate(&SynthConfig {
-        frames: 30,
-        points: 300,
-        outliers: 0.5,
-        outlier_kind: OutlierKind::SecondObject,
-        gross: 0.05,
-        missing: 0.4,
-        min_track_length: 6,
-        seed: 339,
-        ..Default::default()
-    })
-    .unwrap();
+    let s = benchmark_scene(OutlierKind::SecondObject, 0.5, 0.05, 339);
     let r = run(&s, 1);
     match r.verdict {
         Verdict::NoRigidMajority {
@@ -475,18 +464,7 @@ fn unusable_input_is_a_typed_error() {
 #[test]
 fn no_frame_keeps_an_off_camera_with_its_entries_flagged() {
     for seed in [101, 216] {
-        let s = generate(&SynthConfig {
-            frames: 30,
-            points: 300,
-            outliers: 0.3,
-            outlier_kind: OutlierKind::Mixed,
-            gross: 0.01,
-            missing: 0.4,
-            min_track_length: 6,
-            seed,
-            ..Default::default()
-        })
-        .unwrap();
+        let s = benchmark_scene(OutlierKind::Mixed, 0.3, 0.01, seed);
         let r = run(&s, 1);
         assert!(r.verdict.is_rigid_majority());
         let gross: HashSet<(usize, usize)> = s.gross_entries.iter().copied().collect();
