@@ -197,12 +197,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let Some(model) = r.model.as_ref().filter(|_| fp >= 3) else {
                 continue;
             };
-            let predict = |p: usize, c: usize| {
-                r.coordinates[p].map(|s| {
-                    let row = &model.m[3 * (2 * f + c)..3 * (2 * f + c) + 3];
-                    row[0] * s[0] + row[1] * s[1] + row[2] * s[2] + model.t[2 * f + c]
-                })
-            };
             let (mut n_obs, mut n_out, mut ss, mut cnt) = (0, 0, 0.0, 0);
             let mut contaminators = String::new();
             for p in 0..n {
@@ -218,7 +212,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     n_out += 1;
                     let fl = r.flagged_entries.binary_search(&(f, p)).is_ok();
                     contaminators += &format!(" {p}:{dev:.1}px{}", if fl { "*" } else { "" });
-                } else if let (Some(x), Some(y)) = (predict(p, 0), predict(p, 1)) {
+                } else if let Some([x, y]) = r.coordinates[p].map(|s| model.predict(f, &s)) {
                     ss += (x - t[0]).powi(2) + (y - t[1]).powi(2);
                     cnt += 1;
                     if std::env::var("DIAG_FRAMES").is_ok() {
