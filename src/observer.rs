@@ -28,6 +28,13 @@ pub enum Event<'a> {
     },
     /// A human-readable warning (also kept in the result).
     Warning { message: &'a str },
+    /// The frames and tracks (indices into the input table) that the fit uses,
+    /// once the set-aside and robust passes have chosen them. Sent once per run, before
+    /// the `factorize` stage; a run that fails earlier never sends it.
+    FitSelection {
+        frames: &'a [usize],
+        tracks: &'a [usize],
+    },
 }
 
 /// Receives [`Event`]s. Implementations must be cheap: they run inside solver loops.

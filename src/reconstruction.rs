@@ -461,6 +461,10 @@ impl Reconstruction {
             .collect();
         let outlier_kept: Vec<usize> = (0..kept.n_tracks()).filter(|&p| !inlier[p]).collect();
         let meas = fit.measurements();
+        timer.observer.on_event(&Event::FitSelection {
+            frames: &used_frames,
+            tracks: &used_tracks,
+        });
 
         let mut completion_report = None;
         let affine = timer.run("factorize", |obs| -> Result<Affine> {

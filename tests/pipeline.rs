@@ -4,7 +4,7 @@ use nalgebra::Vector3;
 use rank3::eval::{median, rotation_errors_deg, structure_error};
 use rank3::metric::UpgradeMethod;
 use rank3::synth::{Motion, Shape, SynthConfig, generate};
-use rank3::{CameraModel, Config, Error, Reconstruction, TrackTable};
+use rank3::{CameraModel, Config, Error, Event, Observer, Reconstruction, TrackTable};
 
 /// The core pipeline without the robust pass (tested on its own below and in
 /// tests/robust.rs), so these tests measure factorization, upgrade and refinement alone.
@@ -313,6 +313,48 @@ fn robust_pass_rejects_outliers_in_the_pipeline() {
         json["robust"]["n_outlier_tracks"].as_u64().unwrap() as usize,
         flagged_out.iter().filter(|&&f| f).count()
     );
+}
+
+/// The pipeline announces the frames and tracks of its fit once, before it factorizes, and
+/// they are those the result reports as kept (outlier tracks excluded).
+#[test]
+fn fit_selection_event_names_the_kept_frames_and_tracks() {
+    #[derive(Default)]
+    struct Probe {
+        selections: Vec<(Vec<usize>, Vec<usize>)>,
+        factorize_started_after: Option<usize>,
+    }
+    impl Observer for Probe {
+        fn on_event(&mut self, event: &Event<'_>) {
+            match event {
+                Event::FitSelection { frames, tracks } => {
+                    self.selections.push((frames.to_vec(), tracks.to_vec()))
+                }
+                Event::StageStarted { stage: "factorize" } => {
+                    self.factorize_started_after = Some(self.selections.len())
+                }
+                _ => {}
+            }
+        }
+    }
+    let scene = generate(&SynthConfig {
+        frames: 12,
+        points: 60,
+        noise: 0.5,
+        outliers: 0.2,
+        seed: 5,
+        ..Default::default()
+    })
+    .unwrap();
+    let mut probe = Probe::default();
+    let rec =
+        Reconstruction::from_tracks_observed(&scene.table, &Config::default(), &mut probe).unwrap();
+    assert!(rec.kept_tracks.len() < 60, "no outlier track was excluded");
+    assert_eq!(
+        probe.selections,
+        vec![(rec.kept_frames.clone(), rec.kept_tracks.clone())]
+    );
+    assert_eq!(probe.factorize_started_after, Some(1));
 }
 
 /// Most tracks are random walks: no rigid majority, and the pipeline says so instead of
