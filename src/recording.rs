@@ -54,9 +54,19 @@
 //! [`RecordingOptions::max_residual_arrows_per_frame`] (evenly spaced tracks). Both are
 //! generous by default; see the crate README for measured file sizes and overhead.
 //!
-//! Per-frame data go out as one chunk per entity (`send_columns`) with the Arrow arrays built
+//! Per-frame data go out as one chunk per entity (`send_columns`; residual arrows in chunks
+//! of about [`RecordingOptions::residual_arrows_per_chunk`]) with the Arrow arrays built
 //! directly from flat buffers, so the SDK neither serializes 10⁵ points one by one nor
 //! re-batches a hundred rows.
+//!
+//! # Cost
+//!
+//! [`reconstruct_recorded`] logs the input, the visibility mask and W on a second thread
+//! while the pipeline runs (W once the pipeline announces its fit with
+//! [`Event::FitSelection`]), and the result afterwards, largest entity first, so that the
+//! SDK's writer thread encodes it while the rest is built. On a 100-frame × 2000-track run
+//! (8.4 MB file) this costs about 4–5 % of the pipeline's time; see the crate's
+//! `docs/results.md` and `examples/recording_overhead.rs`.
 //!
 //! Cost: O(F·N) for the per-frame data (points, arrows, mask, W), O(N + F) for the rest.
 
@@ -192,6 +202,10 @@ pub struct RecordingOptions {
     /// Tracks get an annotation context (class id → track id label) up to this many
     /// tracks (class ids are 16-bit). Default 65535.
     pub max_annotated_tracks: usize,
+    /// Residual arrows go out in chunks of whole frames holding about this many arrows
+    /// (at least one frame each), so that the SDK's writer encodes a chunk while the next
+    /// is built. Default 65536.
+    pub residual_arrows_per_chunk: usize,
 }
 
 impl Default for RecordingOptions {
@@ -200,6 +214,7 @@ impl Default for RecordingOptions {
             max_image_side: 4096,
             max_residual_arrows_per_frame: 5000,
             max_annotated_tracks: 65535,
+            residual_arrows_per_chunk: 1 << 16,
         }
     }
 }
@@ -267,12 +282,32 @@ impl RecordingArgs {
 /// ([`RecordingObserver`]), then the result ([`log_reconstruction`]) or the error
 /// ([`log_error`]). Without `rec` it is [`Reconstruction::from_tracks`]. Failed log calls
 /// inside the pipeline are reported as a warning in the result.
+///
+/// The input, the visibility mask and W ([`log_measurement_matrix`], as soon as the
+/// pipeline announces the frames and tracks of its fit with [`Event::FitSelection`]) are
+/// logged on a second thread while the pipeline runs, so that their cost overlaps the
+/// pipeline's instead of adding to it.
 pub fn reconstruct_recorded(
     rec: Option<&RecordingStream>,
     table: &TrackTable,
     config: &Config,
 ) -> RecordingResult<Reconstruction> {
     reconstruct_recorded_with(rec, table, config, &mut crate::NoopObserver)
+}
+
+/// Forwards the first [`Event::FitSelection`] to the thread that logs W.
+struct SelectionForward(Option<std::sync::mpsc::Sender<(Vec<usize>, Vec<usize>)>>);
+
+impl Observer for SelectionForward {
+    fn on_event(&mut self, event: &Event<'_>) {
+        if let Event::FitSelection { frames, tracks } = event
+            && let Some(tx) = self.0.take()
+        {
+            // The receiver only goes away if its thread failed; that error is reported
+            // when the thread is joined.
+            tx.send((frames.to_vec(), tracks.to_vec())).ok();
+        }
+    }
 }
 
 /// [`reconstruct_recorded`] with every pipeline event also sent to `extra` (a progress
@@ -286,11 +321,38 @@ pub fn reconstruct_recorded_with(
     let Some(rec) = rec else {
         return Ok(Reconstruction::from_tracks_observed(table, config, extra)?);
     };
-    log_input(rec, table)?;
-    let mut observer = RecordingObserver::new(rec);
-    let result =
-        Reconstruction::from_tracks_observed(table, config, &mut crate::Both(&mut observer, extra));
-    observer.flush();
+    let options = RecordingOptions::default();
+    let (result, matrix_logged, observer) = std::thread::scope(|scope| {
+        let (tx, rx) = std::sync::mpsc::channel::<(Vec<usize>, Vec<usize>)>();
+        let opts = &options;
+        let background = scope.spawn(move || -> RecordingResult<bool> {
+            log_input_with(rec, table, opts)?;
+            log_visibility(rec, table, opts)?;
+            // Blocks until the pipeline has chosen its fit, or has ended without one.
+            match rx.recv() {
+                Ok((frames, tracks)) => {
+                    log_measurement_matrix(rec, table, &frames, &tracks, opts)?;
+                    Ok(true)
+                }
+                Err(_) => Ok(false),
+            }
+        });
+        let mut observer = RecordingObserver::new(rec);
+        let mut forward = SelectionForward(Some(tx));
+        let result = Reconstruction::from_tracks_observed(
+            table,
+            config,
+            &mut crate::Both(&mut observer, crate::Both(&mut forward, extra)),
+        );
+        // Closes the channel if the pipeline ended before choosing its fit.
+        drop(forward);
+        observer.flush();
+        let logged = background
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        (result, logged, observer)
+    });
+    let matrix_logged = matrix_logged?;
     match result {
         Ok(mut result) => {
             if let (n @ 1.., Some(first)) = observer.errors() {
@@ -298,7 +360,7 @@ pub fn reconstruct_recorded_with(
                     .warnings
                     .push(format!("recording: {n} log call(s) failed, first: {first}"));
             }
-            log_reconstruction(rec, table, &result)?;
+            log_result(rec, table, &result, &options, !matrix_logged)?;
             if let Some(r) = &result.robust {
                 let mut inliers = vec![false; table.n_tracks()];
                 for &p in &result.kept_tracks {
@@ -614,18 +676,34 @@ fn class_id_array(ids: Vec<u16>) -> ArrayRef {
 }
 
 /// The observed positions of `tracks` in frame order (gaps bridged), concatenated, with
-/// each track's number of points.
+/// each track's number of points. Two passes over the table's frame rows (count, then
+/// fill), so that the table is read in memory order.
 fn trajectories(table: &TrackTable, tracks: &[usize]) -> (Vec<f32>, Vec<usize>) {
-    let mut flat = Vec::new();
-    let mut lengths = Vec::with_capacity(tracks.len());
-    for &p in tracks {
-        let before = flat.len();
-        for f in 0..table.n_frames() {
-            if let Some([x, y]) = table.get(f, p) {
-                flat.extend([x as f32, y as f32]);
+    let mut lengths = vec![0usize; tracks.len()];
+    for f in 0..table.n_frames() {
+        let (_, _, vis) = table.frame_row(f);
+        for (len, &p) in lengths.iter_mut().zip(tracks) {
+            *len += usize::from(vis[p]);
+        }
+    }
+    let mut next: Vec<usize> = lengths
+        .iter()
+        .scan(0, |start, &len| {
+            let s = *start;
+            *start += len;
+            Some(2 * s)
+        })
+        .collect();
+    let mut flat = vec![0f32; 2 * lengths.iter().sum::<usize>()];
+    for f in 0..table.n_frames() {
+        let (x, y, vis) = table.frame_row(f);
+        for (at, &p) in next.iter_mut().zip(tracks) {
+            if vis[p] {
+                flat[*at] = x[p] as f32;
+                flat[*at + 1] = y[p] as f32;
+                *at += 2;
             }
         }
-        lengths.push((flat.len() - before) / 2);
     }
     (flat, lengths)
 }
@@ -655,15 +733,25 @@ fn frame_points(
     frames: &[usize],
     tracks: &[usize],
 ) -> (Vec<f32>, Vec<u16>, Vec<usize>) {
-    let mut flat = Vec::new();
-    let mut ids = Vec::new();
+    let ids_of: Vec<u16> = tracks.iter().map(|&p| class_id(p)).collect();
+    let n = frames
+        .iter()
+        .map(|&f| {
+            let (_, _, vis) = table.frame_row(f);
+            tracks.iter().filter(|&&p| vis[p]).count()
+        })
+        .sum::<usize>();
+    let mut flat = Vec::with_capacity(2 * n);
+    let mut ids = Vec::with_capacity(n);
     let mut lengths = Vec::with_capacity(frames.len());
     for &f in frames {
         let before = ids.len();
-        for &p in tracks {
-            if let Some([x, y]) = table.get(f, p) {
-                flat.extend([x as f32, y as f32]);
-                ids.push(class_id(p));
+        let (x, y, vis) = table.frame_row(f);
+        for (&p, &id) in tracks.iter().zip(&ids_of) {
+            if vis[p] {
+                flat.push(x[p] as f32);
+                flat.push(y[p] as f32);
+                ids.push(id);
             }
         }
         lengths.push(ids.len() - before);
@@ -781,11 +869,34 @@ pub fn log_reconstruction_with(
     result: &Reconstruction,
     options: &RecordingOptions,
 ) -> RecordingResult {
+    log_result(rec, table, result, options, true)
+}
+
+/// [`log_reconstruction_with`], with the visibility mask and W left out when
+/// `with_matrix` is false (already logged while the pipeline ran).
+fn log_result(
+    rec: &RecordingStream,
+    table: &TrackTable,
+    result: &Reconstruction,
+    options: &RecordingOptions,
+    with_matrix: bool,
+) -> RecordingResult {
     check_consistent(table, result)?;
-    log_set_aside(rec, table, result)?;
-    log_factorization(rec, table, result, options)?;
-    log_metric(rec, result)?;
+    // The largest part first, so that the SDK's writer encodes it while the rest is built.
     log_residuals(rec, table, result, options)?;
+    log_set_aside(rec, table, result)?;
+    if with_matrix {
+        log_visibility(rec, table, options)?;
+        log_measurement_matrix(
+            rec,
+            table,
+            &result.kept_frames,
+            &result.kept_tracks,
+            options,
+        )?;
+    }
+    log_factorization(rec, result)?;
+    log_metric(rec, result)?;
     at_stage(rec, "result");
     rec.log(
         paths::SUMMARY,
@@ -870,44 +981,85 @@ fn log_set_aside(rec: &RecordingStream, table: &TrackTable, r: &Reconstruction) 
     )
 }
 
-fn log_factorization(
+/// Logs the visibility mask of the whole input table on `factorization/visibility` (an
+/// L8 image, white = observed, subsampled per [`RecordingOptions::max_image_side`]) at stage
+/// `factorize`.
+///
+/// Cost: O(F·N).
+pub fn log_visibility(
     rec: &RecordingStream,
     table: &TrackTable,
-    r: &Reconstruction,
     options: &RecordingOptions,
 ) -> RecordingResult {
     at_stage(rec, "factorize");
-    // Visibility mask of the whole input table.
     let rows = subsample(table.n_frames(), options.max_image_side);
     let cols = subsample(table.n_tracks(), options.max_image_side);
     let mut mask = Vec::with_capacity(rows.len() * cols.len());
     for &f in &rows {
-        for &p in &cols {
-            mask.push(if table.is_visible(f, p) { 255u8 } else { 0 });
-        }
+        let (_, _, vis) = table.frame_row(f);
+        mask.extend(cols.iter().map(|&p| if vis[p] { 255u8 } else { 0 }));
     }
     rec.log(
         paths::VISIBILITY,
         &Image::from_l8(mask, [cols.len() as u32, rows.len() as u32]),
     )?;
-    // W of the kept frames and tracks (rows x0, y0, x1, y1, …), NaN where unobserved.
-    let frames = subsample(r.kept_frames.len(), options.max_image_side / 2);
-    let tracks = subsample(r.kept_tracks.len(), options.max_image_side);
-    let mut w = Vec::with_capacity(2 * frames.len() * tracks.len());
-    for &kf in &frames {
-        for c in 0..2 {
-            for &kp in &tracks {
-                let v = table.get(r.kept_frames[kf], r.kept_tracks[kp]);
-                w.push(v.map_or(f32::NAN, |xy| xy[c] as f32));
+    Ok(())
+}
+
+/// Logs the measurement matrix W of the given input `frames` and `tracks` (indices into
+/// `table`) on `factorization/W` at stage `factorize`: a 2F'×N' f32 tensor with rows x₀, y₀,
+/// x₁, y₁, … and NaN where unobserved, subsampled per [`RecordingOptions::max_image_side`].
+///
+/// Cost: O(F'·N').
+pub fn log_measurement_matrix(
+    rec: &RecordingStream,
+    table: &TrackTable,
+    frames: &[usize],
+    tracks: &[usize],
+    options: &RecordingOptions,
+) -> RecordingResult {
+    if let Some(&bad) = frames
+        .iter()
+        .find(|&&f| f >= table.n_frames())
+        .or_else(|| tracks.iter().find(|&&p| p >= table.n_tracks()))
+    {
+        return Err(Error::Dimension {
+            context: "recording::log_measurement_matrix (frames, tracks)",
+            expected: format!(
+                "frame indices below {} and track indices below {}",
+                table.n_frames(),
+                table.n_tracks()
+            ),
+            got: bad.to_string(),
+        }
+        .into());
+    }
+    at_stage(rec, "factorize");
+    let rows = subsample(frames.len(), options.max_image_side / 2);
+    let cols = subsample(tracks.len(), options.max_image_side);
+    let mut w = vec![f32::NAN; 2 * rows.len() * cols.len()];
+    let cols: Vec<usize> = cols.iter().map(|&kp| tracks[kp]).collect();
+    for (r, &kf) in rows.iter().enumerate() {
+        let (wx, wy) = w[2 * r * cols.len()..(2 * r + 2) * cols.len()].split_at_mut(cols.len());
+        let (x, y, vis) = table.frame_row(frames[kf]);
+        for ((&p, u), v) in cols.iter().zip(wx).zip(wy) {
+            if vis[p] {
+                (*u, *v) = (x[p] as f32, y[p] as f32);
             }
         }
     }
     let w = TensorData::new(
-        vec![2 * frames.len() as u64, tracks.len() as u64],
+        vec![2 * rows.len() as u64, cols.len() as u64],
         TensorBuffer::F32(w.into()),
     )
     .with_dim_names(["row (2·frame + x|y)", "track"]);
     rec.log(paths::W, &Tensor::new(w))?;
+    Ok(())
+}
+
+/// The factorization's results: singular values, σ4/σ3 and the affine structure.
+fn log_factorization(rec: &RecordingStream, r: &Reconstruction) -> RecordingResult {
+    at_stage(rec, "factorize");
     rec.log(
         paths::SINGULAR_VALUES,
         &BarChart::new(r.singular_values.clone()),
@@ -1077,38 +1229,55 @@ fn log_residuals(
         &BarChart::new(r.points.iter().map(|p| p.rms_px).collect::<Vec<f64>>()),
     )?;
     let tracks = subsample(r.kept_tracks.len(), options.max_residual_arrows_per_frame);
-    let mut origins = Vec::new();
-    let mut vectors = Vec::new();
-    let mut ids = Vec::new();
-    let mut lengths = Vec::with_capacity(r.kept_frames.len());
-    for (kf, &fi) in r.kept_frames.iter().enumerate() {
-        let before = ids.len();
-        for &kp in &tracks {
-            let pi = r.kept_tracks[kp];
-            if let Some(obs) = table.get(fi, pi) {
-                let q = r.model.project(kf, kp);
-                origins.extend([obs[0] as f32, obs[1] as f32]);
-                vectors.extend([(q[0] - obs[0]) as f32, (q[1] - obs[1]) as f32]);
-                ids.push(class_id(pi));
+    let inputs: Vec<usize> = tracks.iter().map(|&kp| r.kept_tracks[kp]).collect();
+    // Sent in blocks of frames (RecordingOptions::residual_arrows_per_chunk), so that the
+    // SDK's writer encodes a block while the next one is built.
+    let block = (options.residual_arrows_per_chunk / tracks.len().max(1)).max(1);
+    let frames: Vec<(usize, usize)> = r.kept_frames.iter().copied().enumerate().collect();
+    for part in frames.chunks(block) {
+        let n = part
+            .iter()
+            .map(|&(_, fi)| {
+                let (_, _, vis) = table.frame_row(fi);
+                inputs.iter().filter(|&&p| vis[p]).count()
+            })
+            .sum::<usize>();
+        let mut origins = Vec::with_capacity(2 * n);
+        let mut vectors = Vec::with_capacity(2 * n);
+        let mut ids = Vec::with_capacity(n);
+        let mut lengths = Vec::with_capacity(part.len());
+        for &(kf, fi) in part {
+            let before = ids.len();
+            let (x, y, vis) = table.frame_row(fi);
+            for (&kp, &pi) in tracks.iter().zip(&inputs) {
+                if vis[pi] {
+                    let q = r.model.project(kf, kp);
+                    origins.push(x[pi] as f32);
+                    origins.push(y[pi] as f32);
+                    vectors.push((q[0] - x[pi]) as f32);
+                    vectors.push((q[1] - y[pi]) as f32);
+                    ids.push(class_id(pi));
+                }
             }
+            lengths.push(ids.len() - before);
         }
-        lengths.push(ids.len() - before);
+        let columns = vec![
+            SerializedComponentBatch::new(vec2_array(vectors)?, Arrows2D::descriptor_vectors())
+                .partitioned(lengths.iter().copied())?,
+            SerializedComponentBatch::new(vec2_array(origins)?, Arrows2D::descriptor_origins())
+                .partitioned(lengths.iter().copied())?,
+            SerializedComponentBatch::new(class_id_array(ids), Arrows2D::descriptor_class_ids())
+                .partitioned(lengths.iter().copied())?,
+        ];
+        let frame_values: Vec<usize> = part.iter().map(|&(_, fi)| fi).collect();
+        send_per_frame(
+            rec,
+            paths::RESIDUAL_ARROWS,
+            "refine",
+            &frame_values,
+            columns,
+        )?;
     }
-    let columns = vec![
-        SerializedComponentBatch::new(vec2_array(vectors)?, Arrows2D::descriptor_vectors())
-            .partitioned(lengths.iter().copied())?,
-        SerializedComponentBatch::new(vec2_array(origins)?, Arrows2D::descriptor_origins())
-            .partitioned(lengths.iter().copied())?,
-        SerializedComponentBatch::new(class_id_array(ids), Arrows2D::descriptor_class_ids())
-            .partitioned(lengths.iter().copied())?,
-    ];
-    send_per_frame(
-        rec,
-        paths::RESIDUAL_ARROWS,
-        "refine",
-        &r.kept_frames,
-        columns,
-    )?;
     let rms = Scalars::update_fields()
         .with_scalars(r.frames.iter().map(|f| f.rms_px))
         .columns_of_unit_batches()?;
@@ -1447,6 +1616,31 @@ mod tests {
         assert_eq!(
             ids.data_type(),
             &rerun::components::ClassId::arrow_datatype()
+        );
+    }
+
+    /// Trajectories are built in memory order by two passes; they must equal the
+    /// per-track walk through the frames, gaps bridged.
+    #[test]
+    fn trajectories_match_a_walk_along_each_track() {
+        let mut t = TrackTable::new(
+            (0..4).map(crate::tracks::Id::Int).collect(),
+            (0..3).map(crate::tracks::Id::Int).collect(),
+        );
+        for (f, p, x, y) in [
+            (0, 0, 1.0, 2.0),
+            (2, 0, 3.0, 4.0),
+            (1, 2, 5.0, 6.0),
+            (3, 2, 7.0, 8.0),
+            (0, 2, 9.0, 10.0),
+        ] {
+            t.set(f, p, x, y);
+        }
+        let (flat, lengths) = trajectories(&t, &[2, 1, 0]);
+        assert_eq!(lengths, vec![3, 0, 2]);
+        assert_eq!(
+            flat,
+            vec![9.0, 10.0, 5.0, 6.0, 7.0, 8.0, 1.0, 2.0, 3.0, 4.0]
         );
     }
 }

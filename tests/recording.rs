@@ -353,6 +353,150 @@ fn recording_round_trips_through_the_rerun_decoder() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `reconstruct_recorded` logs the input, the mask and W on a second thread while the
+/// pipeline runs: each exactly once, W being the matrix of the frames and tracks the fit
+/// used (the two stray tracks are set aside), with the values of the table.
+#[test]
+fn reconstruct_recorded_logs_w_of_the_fit_once() {
+    let (table, n_used) = table();
+    let nf = table.n_frames();
+    let dir = std::env::temp_dir().join(format!("rank3-recording-w-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("run.rrd");
+    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
+        .save(&path)
+        .unwrap();
+    let result = recording::reconstruct_recorded(Some(&rec), &table, &Config::default()).unwrap();
+    drop(rec);
+    assert_eq!(result.kept_tracks.len(), n_used);
+    let c = read_rrd(&path);
+
+    let tracks = c.get(paths::TRACKS, "Points2D:positions");
+    assert_eq!((tracks.rows(), tracks.total()), (nf, table.n_observed()));
+    assert_eq!(c.get(paths::TRAJECTORIES, "LineStrips2D:strips").rows(), 1);
+    let mask = c.get(paths::VISIBILITY, "Image:buffer");
+    assert_eq!((mask.rows(), mask.times["stage"].clone()), (1, vec![3]));
+    let w_col = c.get(paths::W, "Tensor:data");
+    assert_eq!((w_col.rows(), w_col.times["stage"].clone()), (1, vec![3]));
+
+    let id = rerun::Tensor::descriptor_data().component;
+    let w: Vec<rerun::components::TensorData> = c
+        .chunks
+        .iter()
+        .filter(|ch| ch.entity_path().to_string().trim_start_matches('/') == paths::W)
+        .flat_map(|ch| ch.iter_component::<rerun::components::TensorData>(id))
+        .flat_map(|row| row.to_vec())
+        .collect();
+    assert_eq!(w.len(), 1);
+    let w = &w[0].0;
+    assert_eq!(w.shape.to_vec(), vec![2 * nf as u64, n_used as u64]);
+    let rerun::datatypes::TensorBuffer::F32(values) = &w.buffer else {
+        panic!("W is not f32: {:?}", w.buffer.dtype());
+    };
+    for (kf, &f) in result.kept_frames.iter().enumerate() {
+        for (kp, &p) in result.kept_tracks.iter().enumerate() {
+            let [x, y] = table.get(f, p).unwrap();
+            assert_eq!(values[2 * kf * n_used + kp], x as f32, "W x at ({f}, {p})");
+            assert_eq!(
+                values[(2 * kf + 1) * n_used + kp],
+                y as f32,
+                "W y at ({f}, {p})"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A run that fails before its fit is chosen still records its input and the error, and
+/// the thread that waits for the fit's frames and tracks does not hang.
+#[test]
+fn reconstruct_recorded_records_a_failed_run() {
+    // Two tracks cannot be factorized: the pipeline fails before the factorization.
+    let mut table = TrackTable::new((0..5).map(Id::Int).collect(), (0..2).map(Id::Int).collect());
+    for f in 0..5 {
+        for p in 0..2 {
+            table.set(f, p, f as f64 + 3.0 * p as f64, p as f64);
+        }
+    }
+    let dir = std::env::temp_dir().join(format!("rank3-recording-fail-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("run.rrd");
+    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
+        .save(&path)
+        .unwrap();
+    let err = recording::reconstruct_recorded(Some(&rec), &table, &Config::default());
+    assert!(err.is_err(), "a 5 × 2 table reconstructs?");
+    drop(rec);
+    let c = read_rrd(&path);
+    assert_eq!(c.get(paths::TRACKS, "Points2D:positions").total(), 10);
+    assert_eq!(c.get(paths::LOG_ERRORS, "TextLog:text").rows(), 1);
+    assert!(
+        !c.columns
+            .contains_key(&(paths::W.to_string(), "Tensor:data".to_string()))
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Residual arrows go out in blocks of frames; split into many chunks they are still one
+/// row per kept frame, in frame order, each arrow from the observation to the prediction.
+#[test]
+fn residual_arrows_in_many_chunks_keep_every_frame() {
+    let (table, n_used) = table();
+    let nf = table.n_frames();
+    let result = Reconstruction::from_tracks(&table, &Config::default()).unwrap();
+    let dir = std::env::temp_dir().join(format!("rank3-recording-arrows-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("run.rrd");
+    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
+        .save(&path)
+        .unwrap();
+    let options = recording::RecordingOptions {
+        residual_arrows_per_chunk: 2 * n_used + 1,
+        ..Default::default()
+    };
+    recording::log_reconstruction_with(&rec, &table, &result, &options).unwrap();
+    drop(rec);
+    let c = read_rrd(&path);
+    let arrows = c.get(paths::RESIDUAL_ARROWS, "Arrows2D:vectors");
+    assert_eq!((arrows.rows(), arrows.total()), (nf, nf * n_used));
+    assert_eq!(arrows.times["frame"], (0..nf as i64).collect::<Vec<_>>());
+    let chunks: Vec<&Chunk> = c
+        .chunks
+        .iter()
+        .filter(|ch| ch.entity_path().to_string().trim_start_matches('/') == paths::RESIDUAL_ARROWS)
+        .collect();
+    assert_eq!(chunks.len(), nf.div_ceil(2), "two frames per chunk");
+    let (origins, vectors): (Vec<[f32; 2]>, Vec<[f32; 2]>) = chunks
+        .iter()
+        .flat_map(|ch| {
+            let o = ch
+                .iter_component::<rerun::components::Position2D>(
+                    rerun::Arrows2D::descriptor_origins().component,
+                )
+                .flat_map(|row| row.iter().map(|p| [p.x(), p.y()]).collect::<Vec<_>>())
+                .collect::<Vec<_>>();
+            let v = ch
+                .iter_component::<rerun::components::Vector2D>(
+                    rerun::Arrows2D::descriptor_vectors().component,
+                )
+                .flat_map(|row| row.iter().map(|v| [v.x(), v.y()]).collect::<Vec<_>>())
+                .collect::<Vec<_>>();
+            o.into_iter().zip(v)
+        })
+        .unzip();
+    let mut k = 0;
+    for (kf, &f) in result.kept_frames.iter().enumerate() {
+        for (kp, &p) in result.kept_tracks.iter().enumerate() {
+            let [x, y] = table.get(f, p).unwrap();
+            let q = result.model.project(kf, kp);
+            assert_eq!(origins[k], [x as f32, y as f32]);
+            assert_eq!(vectors[k], [(q[0] - x) as f32, (q[1] - y) as f32]);
+            k += 1;
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn summary_names_the_choices() {
     let (table, _) = table();

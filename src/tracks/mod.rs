@@ -215,6 +215,14 @@ impl TrackTable {
         f * self.track_ids.len() + p
     }
 
+    /// Frame `f`'s row: x, y and visibility of every track (x and y are meaningless where
+    /// not visible). For loops over whole frames without a bounds check per entry.
+    #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
+    pub(crate) fn frame_row(&self, f: usize) -> (&[f64], &[f64], &[bool]) {
+        let r = f * self.track_ids.len()..(f + 1) * self.track_ids.len();
+        (&self.x[r.clone()], &self.y[r.clone()], &self.visible[r])
+    }
+
     /// The observation of track `p` in frame `f`, if any.
     pub fn get(&self, f: usize, p: usize) -> Option<[f64; 2]> {
         let i = self.idx(f, p);
