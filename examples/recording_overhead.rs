@@ -10,8 +10,8 @@
 //! opening and closing the .rrd included. Plain and recorded runs alternate so that a change
 //! in machine load hits both alike; the figures are medians over `RUNS` (default 101) pairs,
 //! plus the median of the per-pair differences. On a shared 2-core machine the overhead
-//! from 21 pairs moved by ±4 percentage points between invocations, from 151 pairs by
-//! about ±0.5.
+//! from 21 pairs of the same code ranged over 2.9–13.5 % between invocations, from 151
+//! pairs over 7.8–9.3 %.
 //!
 //! When the `rank3` binary sits next to this example's directory (`cargo build --release
 //! --bins --examples`), the same table is also written to CSV and `rank3 reconstruct
