@@ -37,11 +37,12 @@
 //! | `metric/eigenvalues_ls`, `metric/eigenvalues` | BarChart | eigenvalues of L |
 //! | `metric/method` | TextDocument | which path solved L and why |
 //! | `world/points` | Points3D | metric structure, coloured by per-point RMS |
+//! | `world/outliers` | Points3D | outlier tracks' points (fitted cameras, not refined), red |
 //! | `world/camera` | Transform3D per frame | camera pose (axes = rows of R) |
 //! | `world/camera/axes` | Arrows3D (static) | i (red), j (green), viewing direction k (blue) |
 //! | `world/cameras/view_directions` | Arrows3D | every frame's viewing direction |
 //! | `world/cameras/trajectory` | LineStrips3D | camera centres in frame order |
-//! | `residuals/point_rms` | BarChart | per-point RMS, pixels |
+//! | `residuals/point_rms` | BarChart | per-point RMS of the kept tracks, pixels |
 //! | `residuals/frame_rms` | Scalars per frame | per-frame RMS, pixels |
 //! | `solver/<name>/run<k>/{cost,rms,lambda}` | Scalars per iteration | solver progress |
 //! | `log/stages`, `log/warnings`, `log/set_aside`, `log/errors` | TextLog | events |
@@ -135,6 +136,8 @@ pub mod paths {
     pub const EIGENVALUES: &str = "metric/eigenvalues";
     pub const METRIC_METHOD: &str = "metric/method";
     pub const POINTS: &str = "world/points";
+    /// Outlier tracks' points, triangulated with the fitted cameras (red).
+    pub const OUTLIER_POINTS: &str = "world/outliers";
     pub const CAMERA: &str = "world/camera";
     pub const CAMERA_AXES: &str = "world/camera/axes";
     pub const VIEW_DIRECTIONS: &str = "world/cameras/view_directions";
@@ -937,7 +940,10 @@ fn check_consistent(table: &TrackTable, r: &Reconstruction) -> RecordingResult {
         || r.model.n_frames() != fk
         || r.model.n_points() != nk
         || r.affine_structure.ncols() != nk
-        || r.points.len() != nk
+        || r.points.len() != nk + r.outlier_tracks.len()
+        || r.points.iter().filter(|p| p.inlier).count() != nk
+        || r.outlier_model.n_points() != r.outlier_tracks.len()
+        || r.outlier_tracks.iter().any(|&p| p >= table.n_tracks())
         || r.frames.len() != fk
         || r.kept_frames.iter().any(|&f| f >= table.n_frames())
         || r.kept_tracks.iter().any(|&p| p >= table.n_tracks());
@@ -1209,6 +1215,12 @@ fn upgrade_text(r: &Reconstruction) -> String {
     s
 }
 
+/// The points of the kept tracks, in `kept_tracks` order: `r.points` holds every kept and
+/// outlier track in input order, and the kept ones are the inliers (both ascending).
+fn kept_points(r: &Reconstruction) -> impl Iterator<Item = &crate::reconstruction::PointResult> {
+    r.points.iter().filter(|p| p.inlier)
+}
+
 fn log_metric(rec: &RecordingStream, r: &Reconstruction) -> RecordingResult {
     at_stage(rec, "metric-upgrade");
     let u = &r.metric_upgrade;
@@ -1221,16 +1233,14 @@ fn log_metric(rec: &RecordingStream, r: &Reconstruction) -> RecordingResult {
         paths::METRIC_METHOD,
         &TextDocument::from_markdown(upgrade_text(r)),
     )?;
-    let max_rms = r
-        .points
-        .iter()
+    let max_rms = kept_points(r)
         .map(|p| p.rms_px)
         .filter(|v| v.is_finite())
         .fold(0.0, f64::max);
     rec.log(
         paths::POINTS,
         &Points3D::new(r.model.points.iter().map(f3))
-            .with_colors(r.points.iter().map(|p| {
+            .with_colors(kept_points(r).map(|p| {
                 heat(if max_rms > 0.0 {
                     p.rms_px / max_rms
                 } else {
@@ -1239,6 +1249,14 @@ fn log_metric(rec: &RecordingStream, r: &Reconstruction) -> RecordingResult {
             }))
             .with_class_ids(r.kept_tracks.iter().map(|&p| class_id(p))),
     )?;
+    if !r.outlier_tracks.is_empty() {
+        rec.log(
+            paths::OUTLIER_POINTS,
+            &Points3D::new(r.outlier_model.points.iter().map(f3))
+                .with_colors([RED])
+                .with_class_ids(r.outlier_tracks.iter().map(|&p| class_id(p))),
+        )?;
+    }
     log_cameras(rec, "world", &r.model, &r.kept_frames)
 }
 
@@ -1251,7 +1269,7 @@ fn log_residuals(
     at_stage(rec, "refine");
     rec.log(
         paths::POINT_RMS,
-        &BarChart::new(r.points.iter().map(|p| p.rms_px).collect::<Vec<f64>>()),
+        &BarChart::new(kept_points(r).map(|p| p.rms_px).collect::<Vec<f64>>()),
     )?;
     let tracks = subsample(r.kept_tracks.len(), options.max_residual_arrows_per_frame);
     let inputs: Vec<usize> = tracks.iter().map(|&kp| r.kept_tracks[kp]).collect();

@@ -407,6 +407,70 @@ fn reconstruct_recorded_logs_w_of_the_fit_once() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A run whose robust pass rejects tracks records them: the result's points hold kept and
+/// outlier tracks, and the recording puts the kept ones on `world/points`, the outliers on
+/// `world/outliers` and in red on the trajectories.
+#[test]
+fn reconstruct_recorded_with_outlier_tracks() {
+    let scene = generate(&SynthConfig {
+        frames: 12,
+        points: 60,
+        noise: 0.5,
+        outliers: 0.2,
+        seed: 5,
+        ..Default::default()
+    })
+    .unwrap();
+    let table = &scene.table;
+    let dir = std::env::temp_dir().join(format!("rank3-recording-outl-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("run.rrd");
+    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
+        .save(&path)
+        .unwrap();
+    let result = recording::reconstruct_recorded(Some(&rec), table, &Config::default()).unwrap();
+    drop(rec);
+    let (nk, no) = (result.kept_tracks.len(), result.outlier_tracks.len());
+    assert!(no > 0, "no outlier track rejected");
+    assert_eq!(result.points.len(), nk + no);
+    let c = read_rrd(&path);
+    assert_eq!(c.get(paths::POINTS, "Points3D:positions").total(), nk);
+    assert_eq!(c.get(paths::POINTS, "Points3D:colors").total(), nk);
+    assert_eq!(
+        c.get(paths::OUTLIER_POINTS, "Points3D:positions").total(),
+        no
+    );
+    assert_eq!(
+        c.get(paths::ROBUST_OUTLIERS, "LineStrips2D:strips").total(),
+        no
+    );
+    let rgb = c.colors(
+        paths::TRAJECTORIES,
+        rerun::LineStrips2D::descriptor_colors().component,
+    );
+    let red: Vec<usize> = (0..table.n_tracks())
+        .filter(|&p| rgb[p][0] > rgb[p][1])
+        .collect();
+    assert_eq!(red, result.outlier_tracks);
+    let kept_entries: usize = result
+        .kept_frames
+        .iter()
+        .map(|&f| {
+            result
+                .kept_tracks
+                .iter()
+                .filter(|&&p| table.is_visible(f, p))
+                .count()
+        })
+        .sum();
+    assert_eq!(
+        c.get(paths::RESIDUAL_ARROWS, "Arrows2D:vectors").total(),
+        kept_entries
+    );
+    assert_eq!(c.get(paths::SUMMARY, "TextDocument:text").rows(), 1);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// A run that fails before its fit is chosen still records its input and the error, and
 /// the thread that waits for the fit's frames and tracks does not hang.
 #[test]
