@@ -817,24 +817,32 @@ fn cli_connect_streams_to_a_rerun_server() {
 /// headless `rerun --port 9876 --save FILE` instead of a window, so the test checks what the
 /// spawned process received, not the viewer's drawing. Skipped, saying so, when port 9876
 /// is already taken (the SDK would then stream to whatever listens there).
+/// The spawn tests share the SDK's spawn port (9876): they run one at a time.
+static SPAWN_PORT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// `bin` (a command name or path) as an absolute path, looked up on PATH.
+fn absolute_command(bin: String) -> String {
+    if bin.contains('/') {
+        return bin;
+    }
+    std::env::split_paths(&std::env::var_os("PATH").unwrap_or_default())
+        .map(|d| d.join(&bin))
+        .find(|p| p.is_file())
+        .unwrap_or_else(|| panic!("{bin} is not on PATH"))
+        .display()
+        .to_string()
+}
+
 #[test]
 fn cli_spawn_streams_to_the_spawned_viewer() {
     let Some(bin) = rerun_cli() else { return };
+    let _port = SPAWN_PORT.lock().unwrap_or_else(|e| e.into_inner());
     if std::net::TcpStream::connect(("127.0.0.1", 9876)).is_ok() {
         eprintln!("SKIPPED: port 9876 is in use (a viewer is running?)");
         return;
     }
     // The real CLI by absolute path: the stand-in below takes the name `rerun` on PATH.
-    let real = if bin.contains('/') {
-        bin
-    } else {
-        std::env::split_paths(&std::env::var_os("PATH").unwrap_or_default())
-            .map(|d| d.join(&bin))
-            .find(|p| p.is_file())
-            .expect("rerun_cli found it on PATH")
-            .display()
-            .to_string()
-    };
+    let real = absolute_command(bin);
     let dir = std::env::temp_dir().join(format!("rank3-recording-spawn-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let stand_in = dir.join("bin");
@@ -887,6 +895,139 @@ exec "$RANK3_TEST_RERUN" --port "$port" --save "$RANK3_TEST_SAVE" >/dev/null 2>&
         Some(Ok(SMALL_RUN_EXPECTED.iter().map(|e| Some(e.3)).collect())),
         "received by the spawned process vs expected (tracks, points, cameras, summary); None: \
          nothing was spawned"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `rank3 reconstruct --spawn` opens the real Rerun 0.36.3 viewer window, which draws the
+/// streamed run. The window lives on a virtual X display (`Xvfb`) and renders with a software
+/// Vulkan driver (Mesa's lavapipe); a stand-in `rerun` on PATH runs the real viewer with
+/// `--screenshot-to`, so the viewer saves what its window shows and quits. The screenshot
+/// must show the run's camera viewing directions, drawn in their colour (60, 90, 255):
+/// hundreds of such pixels, where the viewer's welcome screen (no data) has none. Skipped,
+/// saying so, without the Rerun CLI, `Xvfb` or a Vulkan driver (`.ci/run` installs them).
+#[test]
+fn cli_spawn_opens_the_viewer_window() {
+    let Some(bin) = rerun_cli() else { return };
+    let icds = ["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"];
+    if !icds
+        .iter()
+        .any(|d| std::fs::read_dir(d).is_ok_and(|mut entries| entries.next().is_some()))
+    {
+        eprintln!("SKIPPED: no Vulkan driver (apt-get install mesa-vulkan-drivers)");
+        return;
+    }
+    let Some(display) = (90..200).find(|n| !Path::new(&format!("/tmp/.X11-unix/X{n}")).exists())
+    else {
+        eprintln!("SKIPPED: no free X display number");
+        return;
+    };
+    let xvfb = std::process::Command::new("Xvfb")
+        .arg(format!(":{display}"))
+        .args(["-screen", "0", "1600x1000x24", "-nolisten", "tcp"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn();
+    let mut xvfb = match xvfb {
+        Ok(child) => child,
+        Err(e) => {
+            eprintln!("SKIPPED: cannot start Xvfb ({e}; apt-get install xvfb)");
+            return;
+        }
+    };
+    let _port = SPAWN_PORT.lock().unwrap_or_else(|e| e.into_inner());
+    let socket = format!("/tmp/.X11-unix/X{display}");
+    let started = std::time::Instant::now();
+    while !Path::new(&socket).exists() && started.elapsed().as_secs() < 20 {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let real = absolute_command(bin);
+    let dir = std::env::temp_dir().join(format!("rank3-recording-window-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let stand_in = dir.join("bin");
+    std::fs::create_dir_all(&stand_in).unwrap();
+    std::fs::set_permissions(&dir, std::os::unix::fs::PermissionsExt::from_mode(0o700)).unwrap();
+    let d = dir.display().to_string();
+    let (shot, pid_file) = (dir.join("window.png"), dir.join("viewer.pid"));
+    let script = stand_in.join("rerun");
+    std::fs::write(
+        &script,
+        r#"#!/bin/sh
+if [ "$1" = "--version" ]; then exec "$RANK3_TEST_RERUN" --version; fi
+echo $$ > "$RANK3_TEST_PID.tmp" && mv "$RANK3_TEST_PID.tmp" "$RANK3_TEST_PID"
+exec "$RANK3_TEST_RERUN" "$@" --screenshot-to "$RANK3_TEST_SHOT" --window-size 1600x1000 \
+  >/dev/null 2>&1
+"#,
+    )
+    .unwrap();
+    std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    rank3_ok([
+        "synth",
+        "--out",
+        &format!("{d}/scene"),
+        "--frames",
+        "30",
+        "--points",
+        "60",
+    ]);
+    let mut path = vec![stand_in.clone()];
+    path.extend(std::env::split_paths(
+        &std::env::var_os("PATH").unwrap_or_default(),
+    ));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
+        .args(["reconstruct", &format!("{d}/scene/tracks.csv")])
+        .args(["--out", &format!("{d}/out"), "--spawn"])
+        .env("PATH", std::env::join_paths(path).unwrap())
+        .env("DISPLAY", format!(":{display}"))
+        .env("XDG_RUNTIME_DIR", &dir)
+        .env("RANK3_TEST_RERUN", &real)
+        .env("RANK3_TEST_SHOT", &shot)
+        .env("RANK3_TEST_PID", &pid_file)
+        .env("RERUN_ANALYTICS", "0")
+        .output()
+        .unwrap();
+    // The viewer writes the screenshot, then quits; a half-written file fails to decode.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(90);
+    let image = loop {
+        if let Ok(img) = image::open(&shot) {
+            break Some(img.to_rgb8());
+        }
+        if std::time::Instant::now() > deadline {
+            break None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    };
+    // The spawned viewer is its own process group (the SDK detaches it).
+    if let Some(pid) = std::fs::read_to_string(&pid_file)
+        .ok()
+        .and_then(|s| s.trim().parse::<i32>().ok())
+    {
+        // SAFETY: kill(2) with a negative pid signals that process group; no memory involved.
+        unsafe { libc::kill(-pid, libc::SIGKILL) };
+    }
+    xvfb.kill().ok();
+    xvfb.wait().ok();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let image = image.expect("the spawned viewer saved no screenshot within 90 s");
+    let camera_blue = image
+        .pixels()
+        .filter(|p| {
+            let [r, g, b] = p.0;
+            r.abs_diff(60) <= 15 && g.abs_diff(90) <= 15 && b.abs_diff(255) <= 15
+        })
+        .count();
+    eprintln!("the viewer's window shows {camera_blue} pixels of the cameras' blue");
+    assert!(
+        camera_blue >= 300,
+        "the viewer's window shows {camera_blue} pixels of the cameras' blue ({}×{} \
+         screenshot at {})",
+        image.width(),
+        image.height(),
+        shot.display()
     );
     std::fs::remove_dir_all(&dir).ok();
 }
