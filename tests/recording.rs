@@ -135,6 +135,24 @@ fn try_read_rrd(path: &Path) -> Result<Contents, String> {
     Ok(Contents { columns, chunks })
 }
 
+/// A fresh temporary directory `rank3-recording-{name}-PID` and a recording saved to its
+/// `run.rrd`.
+fn temp_recording(
+    name: &str,
+) -> (
+    std::path::PathBuf,
+    std::path::PathBuf,
+    rerun::RecordingStream,
+) {
+    let dir = std::env::temp_dir().join(format!("rank3-recording-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("run.rrd");
+    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
+        .save(&path)
+        .unwrap();
+    (dir, path, rec)
+}
+
 /// A complete synthetic scene plus two stray tracks seen in one frame (set aside).
 fn table() -> (TrackTable, usize) {
     let scene = generate(&SynthConfig {
@@ -167,13 +185,7 @@ fn table() -> (TrackTable, usize) {
 fn recording_round_trips_through_the_rerun_decoder() {
     let (table, n_used) = table();
     let (nf, n_all) = (table.n_frames(), table.n_tracks());
-    let dir = std::env::temp_dir().join(format!("rank3-recording-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("run.rrd");
-
-    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
-        .save(&path)
-        .unwrap();
+    let (dir, path, rec) = temp_recording("test");
     recording::log_input(&rec, &table).unwrap();
     let mut observer = RecordingObserver::new(&rec);
     let result =
@@ -360,12 +372,7 @@ fn recording_round_trips_through_the_rerun_decoder() {
 fn reconstruct_recorded_logs_w_of_the_fit_once() {
     let (table, n_used) = table();
     let nf = table.n_frames();
-    let dir = std::env::temp_dir().join(format!("rank3-recording-w-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("run.rrd");
-    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
-        .save(&path)
-        .unwrap();
+    let (dir, path, rec) = temp_recording("w");
     let result = recording::reconstruct_recorded(Some(&rec), &table, &Config::default()).unwrap();
     drop(rec);
     assert_eq!(result.kept_tracks.len(), n_used);
@@ -422,12 +429,7 @@ fn reconstruct_recorded_with_outlier_tracks() {
     })
     .unwrap();
     let table = &scene.table;
-    let dir = std::env::temp_dir().join(format!("rank3-recording-outl-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("run.rrd");
-    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
-        .save(&path)
-        .unwrap();
+    let (dir, path, rec) = temp_recording("outl");
     let result = recording::reconstruct_recorded(Some(&rec), table, &Config::default()).unwrap();
     drop(rec);
     let (nk, no) = (result.kept_tracks.len(), result.outlier_tracks.len());
@@ -482,12 +484,7 @@ fn reconstruct_recorded_records_a_failed_run() {
             table.set(f, p, f as f64 + 3.0 * p as f64, p as f64);
         }
     }
-    let dir = std::env::temp_dir().join(format!("rank3-recording-fail-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("run.rrd");
-    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
-        .save(&path)
-        .unwrap();
+    let (dir, path, rec) = temp_recording("fail");
     let err = recording::reconstruct_recorded(Some(&rec), &table, &Config::default());
     assert!(err.is_err(), "a 5 × 2 table reconstructs?");
     drop(rec);
@@ -508,12 +505,7 @@ fn residual_arrows_in_many_chunks_keep_every_frame() {
     let (table, n_used) = table();
     let nf = table.n_frames();
     let result = Reconstruction::from_tracks(&table, &Config::default()).unwrap();
-    let dir = std::env::temp_dir().join(format!("rank3-recording-arrows-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("run.rrd");
-    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
-        .save(&path)
-        .unwrap();
+    let (dir, path, rec) = temp_recording("arrows");
     let options = recording::RecordingOptions {
         residual_arrows_per_chunk: 2 * n_used + 1,
         ..Default::default()
@@ -674,12 +666,7 @@ fn rerun_cli() -> Option<String> {
 fn rerun_viewer_verifies_the_recording() {
     let Some(bin) = rerun_cli() else { return };
     let (table, _) = table();
-    let dir = std::env::temp_dir().join(format!("rank3-recording-verify-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("run.rrd");
-    let rec = rerun::RecordingStreamBuilder::new("rank3-test")
-        .save(&path)
-        .unwrap();
+    let (dir, path, rec) = temp_recording("verify");
     let result = recording::reconstruct_recorded(Some(&rec), &table, &Config::default()).unwrap();
     let n = table.n_tracks();
     recording::log_robust(&rec, &table, &vec![true; n], &[(0, 0)], &[n]).unwrap();
@@ -833,6 +820,34 @@ fn absolute_command(bin: String) -> String {
         .to_string()
 }
 
+/// Writes `script` as a stand-in `rerun` in `dir/bin` and runs `rank3 reconstruct
+/// {dir}/scene/tracks.csv --out {dir}/out --spawn` with that directory first on PATH (the
+/// SDK spawns `rerun` from PATH) and `envs` set.
+fn reconstruct_spawning_stand_in(
+    dir: &Path,
+    script: &str,
+    envs: &[(&str, &std::ffi::OsStr)],
+) -> std::process::Output {
+    let stand_in = dir.join("bin");
+    std::fs::create_dir_all(&stand_in).unwrap();
+    let file = stand_in.join("rerun");
+    std::fs::write(&file, script).unwrap();
+    std::fs::set_permissions(&file, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let mut path = vec![stand_in];
+    path.extend(std::env::split_paths(
+        &std::env::var_os("PATH").unwrap_or_default(),
+    ));
+    let d = dir.display();
+    std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
+        .args(["reconstruct", &format!("{d}/scene/tracks.csv")])
+        .args(["--out", &format!("{d}/out"), "--spawn"])
+        .env("PATH", std::env::join_paths(path).unwrap())
+        .env("RERUN_ANALYTICS", "0")
+        .envs(envs.iter().copied())
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn cli_spawn_streams_to_the_spawned_viewer() {
     let Some(bin) = rerun_cli() else { return };
@@ -845,15 +860,14 @@ fn cli_spawn_streams_to_the_spawned_viewer() {
     let real = absolute_command(bin);
     let dir = std::env::temp_dir().join(format!("rank3-recording-spawn-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let stand_in = dir.join("bin");
-    std::fs::create_dir_all(&stand_in).unwrap();
+    std::fs::create_dir_all(&dir).unwrap();
     let d = dir.display().to_string();
     let (received, pid_file) = (dir.join("received.rrd"), dir.join("viewer.pid"));
+    synth_small_run_scene(&d);
     // Its own output goes to /dev/null: the spawned process would otherwise hold rank3's
     // stdout/stderr pipes open, and `output()` would wait for it.
-    let script = stand_in.join("rerun");
-    std::fs::write(
-        &script,
+    let out = reconstruct_spawning_stand_in(
+        &dir,
         r#"#!/bin/sh
 if [ "$1" = "--version" ]; then exec "$RANK3_TEST_RERUN" --version; fi
 port=
@@ -861,24 +875,12 @@ for a in "$@"; do case "$a" in --port=*) port="${a#--port=}" ;; esac; done
 echo $$ > "$RANK3_TEST_PID.tmp" && mv "$RANK3_TEST_PID.tmp" "$RANK3_TEST_PID"
 exec "$RANK3_TEST_RERUN" --port "$port" --save "$RANK3_TEST_SAVE" >/dev/null 2>&1
 "#,
-    )
-    .unwrap();
-    std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
-    synth_small_run_scene(&d);
-    let mut path = vec![stand_in.clone()];
-    path.extend(std::env::split_paths(
-        &std::env::var_os("PATH").unwrap_or_default(),
-    ));
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
-        .args(["reconstruct", &format!("{d}/scene/tracks.csv")])
-        .args(["--out", &format!("{d}/out"), "--spawn"])
-        .env("PATH", std::env::join_paths(path).unwrap())
-        .env("RANK3_TEST_RERUN", &real)
-        .env("RANK3_TEST_SAVE", &received)
-        .env("RANK3_TEST_PID", &pid_file)
-        .env("RERUN_ANALYTICS", "0")
-        .output()
-        .unwrap();
+        &[
+            ("RANK3_TEST_RERUN", real.as_ref()),
+            ("RANK3_TEST_SAVE", received.as_os_str()),
+            ("RANK3_TEST_PID", pid_file.as_os_str()),
+        ],
+    );
     // The spawned process is its own session leader (the SDK detaches it), so its pid is
     // its process group.
     let pid: Option<u32> = std::fs::read_to_string(&pid_file)
@@ -944,23 +946,11 @@ fn cli_spawn_opens_the_viewer_window() {
     let real = absolute_command(bin);
     let dir = std::env::temp_dir().join(format!("rank3-recording-window-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let stand_in = dir.join("bin");
-    std::fs::create_dir_all(&stand_in).unwrap();
+    std::fs::create_dir_all(&dir).unwrap();
+    // Also the viewer's XDG_RUNTIME_DIR, which must be private.
     std::fs::set_permissions(&dir, std::os::unix::fs::PermissionsExt::from_mode(0o700)).unwrap();
     let d = dir.display().to_string();
     let (shot, pid_file) = (dir.join("window.png"), dir.join("viewer.pid"));
-    let script = stand_in.join("rerun");
-    std::fs::write(
-        &script,
-        r#"#!/bin/sh
-if [ "$1" = "--version" ]; then exec "$RANK3_TEST_RERUN" --version; fi
-echo $$ > "$RANK3_TEST_PID.tmp" && mv "$RANK3_TEST_PID.tmp" "$RANK3_TEST_PID"
-exec "$RANK3_TEST_RERUN" "$@" --screenshot-to "$RANK3_TEST_SHOT" --window-size 1600x1000 \
-  >/dev/null 2>&1
-"#,
-    )
-    .unwrap();
-    std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
     rank3_ok([
         "synth",
         "--out",
@@ -970,22 +960,23 @@ exec "$RANK3_TEST_RERUN" "$@" --screenshot-to "$RANK3_TEST_SHOT" --window-size 1
         "--points",
         "60",
     ]);
-    let mut path = vec![stand_in.clone()];
-    path.extend(std::env::split_paths(
-        &std::env::var_os("PATH").unwrap_or_default(),
-    ));
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
-        .args(["reconstruct", &format!("{d}/scene/tracks.csv")])
-        .args(["--out", &format!("{d}/out"), "--spawn"])
-        .env("PATH", std::env::join_paths(path).unwrap())
-        .env("DISPLAY", format!(":{display}"))
-        .env("XDG_RUNTIME_DIR", &dir)
-        .env("RANK3_TEST_RERUN", &real)
-        .env("RANK3_TEST_SHOT", &shot)
-        .env("RANK3_TEST_PID", &pid_file)
-        .env("RERUN_ANALYTICS", "0")
-        .output()
-        .unwrap();
+    let display_var = format!(":{display}");
+    let out = reconstruct_spawning_stand_in(
+        &dir,
+        r#"#!/bin/sh
+if [ "$1" = "--version" ]; then exec "$RANK3_TEST_RERUN" --version; fi
+echo $$ > "$RANK3_TEST_PID.tmp" && mv "$RANK3_TEST_PID.tmp" "$RANK3_TEST_PID"
+exec "$RANK3_TEST_RERUN" "$@" --screenshot-to "$RANK3_TEST_SHOT" --window-size 1600x1000 \
+  >/dev/null 2>&1
+"#,
+        &[
+            ("DISPLAY", display_var.as_ref()),
+            ("XDG_RUNTIME_DIR", dir.as_os_str()),
+            ("RANK3_TEST_RERUN", real.as_ref()),
+            ("RANK3_TEST_SHOT", shot.as_os_str()),
+            ("RANK3_TEST_PID", pid_file.as_os_str()),
+        ],
+    );
     // The viewer writes the screenshot, then quits; a half-written file fails to decode.
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(90);
     let image = loop {
