@@ -970,11 +970,12 @@ fn check_consistent(table: &TrackTable, r: &Reconstruction) -> RecordingResult {
 
 fn log_set_aside(rec: &RecordingStream, table: &TrackTable, r: &Reconstruction) -> RecordingResult {
     at_stage(rec, "set-aside");
-    let mut kept = vec![false; table.n_tracks()];
-    for &p in &r.kept_tracks {
-        kept[p] = true;
+    // Neither kept nor an outlier of the robust pass (those are drawn by `log_robust`).
+    let mut used = vec![false; table.n_tracks()];
+    for &p in r.kept_tracks.iter().chain(&r.outlier_tracks) {
+        used[p] = true;
     }
-    let aside: Vec<usize> = (0..table.n_tracks()).filter(|&p| !kept[p]).collect();
+    let aside: Vec<usize> = (0..table.n_tracks()).filter(|&p| !used[p]).collect();
     for s in &r.set_aside {
         let what = match s.kind {
             SetAsideKind::Track => "track",

@@ -442,6 +442,14 @@ fn reconstruct_recorded_with_outlier_tracks() {
         c.get(paths::OUTLIER_POINTS, "Points3D:positions").total(),
         no
     );
+    // Outliers are not "set aside" (the scene sets nothing aside).
+    assert!(result.set_aside.is_empty());
+    assert!(
+        !c.columns
+            .keys()
+            .any(|(entity, _)| entity.starts_with("image/set_aside")),
+        "outlier tracks drawn as set aside"
+    );
     assert_eq!(
         c.get(paths::ROBUST_OUTLIERS, "LineStrips2D:strips").total(),
         no
