@@ -283,6 +283,133 @@ impl RecordingArgs {
     }
 }
 
+/// Which parts of the viewer layout [`send_layout`] shows (views of absent data would sit
+/// empty).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LayoutParts {
+    /// Frames and tracker counts (`rank3 track`, `rank3 run`).
+    pub tracking: bool,
+    /// A reconstruction: metric and affine structure, W, spectra, solvers, summary.
+    pub reconstruction: bool,
+    /// Synthetic ground truth (`rank3 synth`).
+    pub truth: bool,
+}
+
+/// Sends a viewer layout (a Rerun blueprint, made active and the default for the
+/// application id) that shows each entity group of the module table in its own view: the
+/// image plane (tracks, trajectories, residual arrows, robust flags, frames) beside the 3D
+/// scene (metric, affine, truth in tabs); below, W and the mask, the bar charts (singular
+/// values, L's eigenvalues, per-point RMS), the time series (solver iterations, frame RMS,
+/// tracker counts) and the texts (summary, metric upgrade, stage log). The time panel starts
+/// on the `stage` timeline. Without a layout the viewer guesses one, and its guess for a
+/// reconstruction showed no 2D view of the tracks at all.
+pub fn send_layout(rec: &RecordingStream, parts: LayoutParts) -> RecordingResult {
+    use rerun::blueprint::{
+        BarChartView, Blueprint, BlueprintActivation, ContainerLike, Horizontal, Spatial2DView,
+        Spatial3DView, Tabs, TensorView, TextDocumentView, TextLogView, TimePanel, TimeSeriesView,
+        Vertical,
+    };
+    let image = Spatial2DView::new("image: tracks, residuals, robust flags").with_origin("/image");
+    let mut scene: Vec<ContainerLike> = Vec::new();
+    if parts.reconstruction {
+        scene.push(
+            Spatial3DView::new("metric structure and cameras")
+                .with_origin("/world")
+                .into(),
+        );
+        scene.push(
+            Spatial3DView::new("affine structure")
+                .with_origin("/affine")
+                .into(),
+        );
+    }
+    if parts.truth {
+        scene.push(
+            Spatial3DView::new("ground truth")
+                .with_origin("/truth")
+                .into(),
+        );
+    }
+    let mut top: Vec<ContainerLike> = vec![image.into()];
+    if !scene.is_empty() {
+        top.push(Tabs::new(scene).into());
+    }
+    let mut bottom: Vec<ContainerLike> = Vec::new();
+    if parts.reconstruction {
+        bottom.push(
+            Tabs::new([
+                TensorView::new("W")
+                    .with_origin(format!("/{}", paths::W))
+                    .into(),
+                Spatial2DView::new("visibility mask")
+                    .with_origin(format!("/{}", paths::VISIBILITY))
+                    .into(),
+            ])
+            .into(),
+        );
+        bottom.push(
+            Tabs::new(
+                [
+                    ("singular values", paths::SINGULAR_VALUES),
+                    ("eigenvalues of L", paths::EIGENVALUES),
+                    ("eigenvalues of least-squares L", paths::EIGENVALUES_LS),
+                    ("per-point RMS (px)", paths::POINT_RMS),
+                ]
+                .map(|(name, path)| {
+                    BarChartView::new(name)
+                        .with_origin(format!("/{path}"))
+                        .into()
+                }),
+            )
+            .into(),
+        );
+    }
+    let mut series: Vec<ContainerLike> = Vec::new();
+    if parts.reconstruction {
+        series.push(
+            TimeSeriesView::new("solvers (iteration timeline)")
+                .with_origin("/solver")
+                .into(),
+        );
+        series.push(
+            TimeSeriesView::new("frame RMS (px)")
+                .with_origin(format!("/{}", paths::FRAME_RMS))
+                .into(),
+        );
+    }
+    if parts.tracking {
+        series.push(
+            TimeSeriesView::new("tracker counts")
+                .with_origin(format!("/{}", paths::TRACKING))
+                .into(),
+        );
+    }
+    if !series.is_empty() {
+        bottom.push(Tabs::new(series).into());
+    }
+    let mut texts: Vec<ContainerLike> = Vec::new();
+    if parts.reconstruction {
+        texts.push(
+            TextDocumentView::new("summary")
+                .with_origin(format!("/{}", paths::SUMMARY))
+                .into(),
+        );
+        texts.push(
+            TextDocumentView::new("metric upgrade")
+                .with_origin(format!("/{}", paths::METRIC_METHOD))
+                .into(),
+        );
+    }
+    texts.push(TextLogView::new("log").with_origin("/log").into());
+    bottom.push(Tabs::new(texts).into());
+    let layout = Vertical::new([Horizontal::new(top).into(), Horizontal::new(bottom).into()])
+        .with_row_shares([0.62, 0.38]);
+    Blueprint::new(layout)
+        .with_time_panel(TimePanel::new().with_timeline(TIMELINE_STAGE))
+        .send(rec, BlueprintActivation::default())?;
+    Ok(())
+}
+
 /// Removes an existing regular, singly linked file at `path`, so that the recording goes to
 /// a new file instead of over a truncated one. Truncating costs more: ext4 frees the old
 /// blocks inside the truncating call, and on close starts writing back a file that was

@@ -645,6 +645,96 @@ fn cli_rrd_flag_records_synth_and_reconstruct() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// The views (class, origin) of the viewer layout (blueprint) saved in `path`, and whether
+/// the blueprint is sent complete and activated.
+fn saved_layout(path: &Path) -> (Vec<(String, String)>, bool) {
+    use rerun::external::arrow::array::{Array as _, StringArray};
+    let file = std::fs::File::open(path).unwrap();
+    let (mut views, mut activated) = (BTreeMap::<String, (String, String)>::new(), false);
+    for msg in DecoderApp::decode_lazy(BufReader::new(file)) {
+        match msg.unwrap() {
+            LogMsg::BlueprintActivationCommand(cmd) => activated |= cmd.make_active,
+            LogMsg::ArrowMsg(store, arrow) if store.is_blueprint() => {
+                let chunk = Chunk::from_arrow_msg(&arrow).unwrap();
+                let entity = chunk.entity_path().to_string();
+                if !entity.trim_start_matches('/').starts_with("view/") {
+                    continue;
+                }
+                for col in chunk.components().0.values() {
+                    let field = col.descriptor.component.to_string();
+                    let values = col.list_array.values();
+                    let Some(text) = values.as_any().downcast_ref::<StringArray>() else {
+                        continue;
+                    };
+                    let view = views.entry(entity.clone()).or_default();
+                    match field.as_str() {
+                        "ViewBlueprint:class_identifier" => view.0 = text.value(0).to_string(),
+                        "ViewBlueprint:space_origin" => view.1 = text.value(0).to_string(),
+                        _ => {}
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    (views.into_values().collect(), activated)
+}
+
+/// `rank3 reconstruct --rrd` saves a viewer layout with the file: a 2D view of the image
+/// plane, 3D views of the metric and affine structure, W as a tensor, and the bar charts,
+/// time series and texts, each on its entity path. `rank3 synth` adds the ground truth.
+#[test]
+fn cli_recordings_carry_a_viewer_layout() {
+    let dir = std::env::temp_dir().join(format!("rank3-recording-layout-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let d = dir.display().to_string();
+    synth_small_run_scene(&d);
+    rank3_ok([
+        "reconstruct",
+        &format!("{d}/scene/tracks.csv"),
+        "--out",
+        &format!("{d}/out"),
+        "--rrd",
+        &format!("{d}/run.rrd"),
+    ]);
+    let (views, activated) = saved_layout(&dir.join("run.rrd"));
+    assert!(activated, "the layout is not activated");
+    let view = |class: &str, origin: &str| (class.to_string(), origin.to_string());
+    for want in [
+        view("2D", "/image"),
+        view("3D", "/world"),
+        view("3D", "/affine"),
+        view("Tensor", &format!("/{}", paths::W)),
+        view("2D", &format!("/{}", paths::VISIBILITY)),
+        view("BarChart", &format!("/{}", paths::SINGULAR_VALUES)),
+        view("BarChart", &format!("/{}", paths::EIGENVALUES)),
+        view("BarChart", &format!("/{}", paths::POINT_RMS)),
+        view("TimeSeries", "/solver"),
+        view("TimeSeries", &format!("/{}", paths::FRAME_RMS)),
+        view("TextDocument", &format!("/{}", paths::SUMMARY)),
+        view("TextLog", "/log"),
+    ] {
+        assert!(views.contains(&want), "{want:?} not in {views:?}");
+    }
+    assert!(!views.iter().any(|v| v.1 == "/truth"), "{views:?}");
+    rank3_ok([
+        "synth",
+        "--out",
+        &format!("{d}/scene2"),
+        "--frames",
+        "6",
+        "--points",
+        "20",
+        "--rrd",
+        &format!("{d}/synth.rrd"),
+    ]);
+    let (views, _) = saved_layout(&dir.join("synth.rrd"));
+    assert!(views.contains(&view("3D", "/truth")), "{views:?}");
+    assert!(views.contains(&view("2D", "/image")), "{views:?}");
+    assert!(!views.iter().any(|v| v.1 == "/world"), "{views:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// The Rerun CLI 0.36.3 (`$RERUN_BIN` or `rerun` on PATH), or `None` with a message saying
 /// why the calling test is skipped. Install it with `pip install rerun-sdk==0.36.3` or
 /// `cargo install rerun-cli --version 0.36.3 --locked` (`.ci/run` does the former).
