@@ -8,7 +8,8 @@
 //!
 //! The solvers know nothing about Rerun: they report to an [`crate::Observer`], and
 //! [`RecordingObserver`] turns those events into log calls. [`log_input`],
-//! [`log_reconstruction`], [`log_robust`] and [`log_synth_truth`] log the data of a run.
+//! [`log_reconstruction`], [`log_robust`] and [`log_synth_truth`] log the data of a run;
+//! [`send_layout`] sends the viewer layout the CLI's recordings carry.
 //!
 //! # Timelines
 //!
