@@ -1720,7 +1720,7 @@ pub fn log_tracking(rec: &RecordingStream, stats: &[crate::track::FrameStats]) -
 
 /// Logs a synthetic scene's ground truth under `truth/`: the true points (outlier tracks
 /// red, the rest grey) on `truth/points` and the true cameras laid out like `world/`
-/// ([`log_cameras`] layout) on `truth/camera…`, at stage `input`. Pair with [`log_input`].
+/// (`log_cameras` layout) on `truth/camera…`, at stage `input`. Pair with [`log_input`].
 ///
 /// Cost: O(F + N).
 pub fn log_synth_truth(rec: &RecordingStream, scene: &SynthScene) -> RecordingResult {

@@ -4,7 +4,7 @@
 //! along an edge, jumps to another object, belongs to an independently moving object), and
 //! a good track has a few gross errors. [`robust_filter`] finds both:
 //!
-//! 1. **Outlier tracks**: RANSAC/MSAC with LO-RANSAC local optimization ([`ransac`]) over
+//! 1. **Outlier tracks**: RANSAC/MSAC with LO-RANSAC local optimization ([`ransac`](mod@ransac)) over
 //!    the tracks, with the affine-subspace track estimator ([`subspace::TrackSubspace`]):
 //!    rigid trajectories span a 3-dimensional affine subspace of R^{2F}; a minimal sample
 //!    of 4 tracks is a hypothesis, a track's residual is its trimmed RMS distance to the
@@ -58,7 +58,7 @@
 //! Complexity: O(I · j̄ · k) for I RANSAC hypotheses (I adaptive, ≤ `max_iterations`)
 //! each scored on `j̄` tracks of `k` frames before the bail-out test abandons it (`j̄` ≈
 //! 32–64 for hopeless hypotheses, the scale bootstrap on at most `scale_subset` tracks; see
-//! [`ransac`]); with missing data add O(I · N · F/64) for sampling; plus a few
+//! [`ransac`](mod@ransac)); with missing data add O(I · N · F/64) for sampling; plus a few
 //! affine refits (O(#observations) per ALS sweep, warm-started from the RANSAC model; the
 //! local-optimization refits on at most `ransac.lo_max_inliers` tracks), plus per
 //! classification round O(#observations) for the track fits and O(32·k) per rejected track

@@ -19,7 +19,7 @@
 //! each point in the points file.
 //!
 //! The module depends on nothing in the crate but [`crate::Error`] and the
-//! [`TrackTable`](crate::TrackTable) it produces.
+//! [`TrackTable`] it produces.
 //!
 //! Complexity per frame: O(W·H) for the pyramid (and detection when it runs), plus
 //! O(P·L·w²·K) for tracking P points over L levels with a w×w window and K iterations
