@@ -67,7 +67,7 @@
 //! while the pipeline runs (W once the pipeline announces its fit with
 //! [`Event::FitSelection`]), and the result afterwards, largest entity first, so that the
 //! SDK's writer thread encodes it while the rest is built. On a 100-frame × 2000-track run
-//! (8.4 MB file) this costs about 4–5 % of the pipeline's time; see the crate's
+//! (8.4 MB file) this costs about 5 % of the pipeline's time (4.3–6.8 %); see the crate's
 //! `docs/results.md` and `examples/recording_overhead.rs`.
 //!
 //! Cost: O(F·N) for the per-frame data (points, arrows, mask, W), O(N + F) for the rest.
