@@ -882,6 +882,22 @@ fn trajectory_batches(
     ])
 }
 
+/// Number of observed entries of `tracks` in `frames`: the size of the per-entry buffers,
+/// allocated up front.
+fn observed_count(
+    table: &TrackTable,
+    frames: impl IntoIterator<Item = usize>,
+    tracks: &[usize],
+) -> usize {
+    frames
+        .into_iter()
+        .map(|f| {
+            let (_, _, vis) = table.frame_row(f);
+            tracks.iter().filter(|&&p| vis[p]).count()
+        })
+        .sum()
+}
+
 /// Per-frame observed points of `tracks` for the given `frames`: concatenated positions,
 /// class ids and the number of points per frame.
 fn frame_points(
@@ -890,13 +906,7 @@ fn frame_points(
     tracks: &[usize],
 ) -> (Vec<f32>, Vec<u16>, Vec<usize>) {
     let ids_of: Vec<u16> = tracks.iter().map(|&p| class_id(p)).collect();
-    let n = frames
-        .iter()
-        .map(|&f| {
-            let (_, _, vis) = table.frame_row(f);
-            tracks.iter().filter(|&&p| vis[p]).count()
-        })
-        .sum::<usize>();
+    let n = observed_count(table, frames.iter().copied(), tracks);
     let mut flat = Vec::with_capacity(2 * n);
     let mut ids = Vec::with_capacity(n);
     let mut lengths = Vec::with_capacity(frames.len());
@@ -1407,13 +1417,7 @@ fn log_residuals(
     let block = (options.residual_arrows_per_chunk / tracks.len().max(1)).max(1);
     let frames: Vec<(usize, usize)> = r.kept_frames.iter().copied().enumerate().collect();
     for part in frames.chunks(block) {
-        let n = part
-            .iter()
-            .map(|&(_, fi)| {
-                let (_, _, vis) = table.frame_row(fi);
-                inputs.iter().filter(|&&p| vis[p]).count()
-            })
-            .sum::<usize>();
+        let n = observed_count(table, part.iter().map(|&(_, fi)| fi), &inputs);
         let mut origins = Vec::with_capacity(2 * n);
         let mut vectors = Vec::with_capacity(2 * n);
         let mut ids = Vec::with_capacity(n);
