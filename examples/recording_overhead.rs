@@ -84,7 +84,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             rrd: Some(path.clone()),
             ..Default::default()
         }
-        .open("rank3-overhead")?
+        .open(
+            "rank3-overhead",
+            recording::LayoutParts {
+                reconstruction: true,
+                ..Default::default()
+            },
+        )?
         .ok_or("no recording sink")?;
         let t1 = Instant::now();
         let r = recording::reconstruct_recorded(Some(&rec), table, &config)?;

@@ -181,16 +181,13 @@ fn main() -> ExitCode {
 
 fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     #[cfg(feature = "rerun")]
-    let recording = a.record.open("rank3")?;
-    #[cfg(feature = "rerun")]
-    if let Some(rec) = &recording {
-        use rank3::recording::{LayoutParts, send_layout};
-        let parts = LayoutParts {
+    let recording = a.record.open(
+        "rank3",
+        rank3::recording::LayoutParts {
             reconstruction: true,
-            ..LayoutParts::default()
-        };
-        send_layout(rec, parts)?;
-    }
+            ..Default::default()
+        },
+    )?;
     let loaded = read_tracks(&a.tracks)?;
     for w in &loaded.warnings {
         eprintln!("warning: {w}");
@@ -345,12 +342,13 @@ fn synth(a: &SynthArgs) -> Result<(), rank3::Error> {
     };
     let scene = rank3::synth::generate(&cfg)?;
     #[cfg(feature = "rerun")]
-    if let Some(rec) = a.record.open("rank3")? {
-        let parts = rank3::recording::LayoutParts {
+    if let Some(rec) = a.record.open(
+        "rank3",
+        rank3::recording::LayoutParts {
             truth: true,
             ..Default::default()
-        };
-        rank3::recording::send_layout(&rec, parts)?;
+        },
+    )? {
         rank3::recording::log_input(&rec, &scene.table)?;
         rank3::recording::log_synth_truth(&rec, &scene)?;
     }
@@ -587,18 +585,16 @@ fn track_recorded(
     #[cfg(feature = "rerun")] record: &rank3::recording::RecordingArgs,
     #[cfg_attr(not(feature = "rerun"), allow(unused_variables))] log_table: bool,
 ) -> Result<(Tracked, Recording), rank3::Error> {
+    // `rank3 track` logs the table itself; `rank3 run` reconstructs from it.
     #[cfg(feature = "rerun")]
-    let recording = record.open("rank3")?;
-    #[cfg(feature = "rerun")]
-    if let Some(rec) = &recording {
-        // `rank3 track` logs the table itself; `rank3 run` reconstructs from it.
-        let parts = rank3::recording::LayoutParts {
+    let recording = record.open(
+        "rank3",
+        rank3::recording::LayoutParts {
             tracking: true,
             reconstruction: !log_table,
             truth: false,
-        };
-        rank3::recording::send_layout(rec, parts)?;
-    }
+        },
+    )?;
     #[cfg(not(feature = "rerun"))]
     let recording = ();
     // Frames are recorded (JPEG) as they are tracked; the first logging failure is kept.

@@ -239,9 +239,21 @@ pub struct RecordingArgs {
 }
 
 impl RecordingArgs {
-    /// Opens the requested sinks (creating the .rrd's directory); `None` when none was
-    /// requested.
-    pub fn open(&self, application_id: &'static str) -> RecordingResult<Option<RecordingStream>> {
+    /// Opens the requested sinks (creating the .rrd's directory) and sends the viewer layout
+    /// of `layout` ([`send_layout`]); `None` when no sink was requested.
+    pub fn open(
+        &self,
+        application_id: &'static str,
+        layout: LayoutParts,
+    ) -> RecordingResult<Option<RecordingStream>> {
+        let rec = self.open_sinks(application_id)?;
+        if let Some(rec) = &rec {
+            send_layout(rec, layout)?;
+        }
+        Ok(rec)
+    }
+
+    fn open_sinks(&self, application_id: &'static str) -> RecordingResult<Option<RecordingStream>> {
         if let Some(dir) = self.rrd.as_deref().and_then(std::path::Path::parent)
             && !dir.as_os_str().is_empty()
         {
