@@ -21,6 +21,36 @@ pub enum CameraModel {
     Orthographic,
     /// Scaled orthographic (weak perspective): one positive scale per frame.
     ScaledOrthographic,
+    /// Projective camera `w ≃ P_f X_p`, `P_f` a 3×4 matrix, `X_p` homogeneous: the
+    /// reconstruction is defined up to a 4×4 homography ([`crate::projective`]). The affine
+    /// stages (warm start, metric blocks of the result) run with the scaled orthographic
+    /// model.
+    Projective,
+    /// Pinhole perspective camera with intrinsics `K`, rotation `R_f` and translation
+    /// `t_f`: `w ≃ K (R_f X + t_f)`. Used by [`crate::synth`] for perspective scenes; the
+    /// Euclidean reconstruction with this model is not built yet (the pipeline returns
+    /// [`crate::Error::InvalidConfig`] for it; use [`CameraModel::Projective`]).
+    Perspective,
+}
+
+impl CameraModel {
+    /// The affine model the affine stages use: the model itself for the affine family,
+    /// scaled orthographic (weak perspective, the first-order approximation of a
+    /// perspective camera) for the projective and perspective models.
+    pub fn affine(self) -> CameraModel {
+        match self {
+            CameraModel::Orthographic => CameraModel::Orthographic,
+            _ => CameraModel::ScaledOrthographic,
+        }
+    }
+
+    /// Whether the model is affine (orthographic or scaled orthographic).
+    pub fn is_affine(self) -> bool {
+        matches!(
+            self,
+            CameraModel::Orthographic | CameraModel::ScaledOrthographic
+        )
+    }
 }
 
 impl std::fmt::Display for CameraModel {
@@ -28,6 +58,8 @@ impl std::fmt::Display for CameraModel {
         f.write_str(match self {
             CameraModel::Orthographic => "orthographic",
             CameraModel::ScaledOrthographic => "scaled-orthographic",
+            CameraModel::Projective => "projective",
+            CameraModel::Perspective => "perspective",
         })
     }
 }

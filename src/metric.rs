@@ -115,7 +115,7 @@ pub fn upgrade(
     let f = m_hat.nrows() / 2;
     let needed = match camera {
         CameraModel::Orthographic => 2,
-        CameraModel::ScaledOrthographic => 3,
+        CameraModel::ScaledOrthographic | CameraModel::Projective | CameraModel::Perspective => 3,
     };
     if f < needed {
         return Err(Error::TooFew {
@@ -155,7 +155,7 @@ pub fn upgrade(
                 b.push(0.0);
             }
         }
-        CameraModel::ScaledOrthographic => {
+        CameraModel::ScaledOrthographic | CameraModel::Projective | CameraModel::Perspective => {
             let mut norm = [0.0; 6];
             for (i, j) in &rows {
                 let ii = bilinear_row(i, i);

@@ -912,7 +912,9 @@ fn initial_model(
         rotations.push(r);
         scales.push(match camera {
             CameraModel::Orthographic => 1.0,
-            CameraModel::ScaledOrthographic => s,
+            CameraModel::ScaledOrthographic
+            | CameraModel::Projective
+            | CameraModel::Perspective => s,
         });
         translations.push(Vector2::new(affine.t[2 * k], affine.t[2 * k + 1]));
     }

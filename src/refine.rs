@@ -671,7 +671,7 @@ fn refine_impl(
     let start = Instant::now();
     let c = match camera {
         CameraModel::Orthographic => 5,
-        CameraModel::ScaledOrthographic => 6,
+        CameraModel::ScaledOrthographic | CameraModel::Projective | CameraModel::Perspective => 6,
     };
     let st = Structure::new(meas);
     let n_scalars = 2 * st.frame.len();
@@ -846,7 +846,9 @@ mod tests {
         let scales = (0..nf)
             .map(|_| match camera {
                 CameraModel::Orthographic => 1.0,
-                CameraModel::ScaledOrthographic => rng.random_range(0.8..1.2),
+                CameraModel::ScaledOrthographic
+                | CameraModel::Projective
+                | CameraModel::Perspective => rng.random_range(0.8..1.2),
             })
             .collect();
         let points = (0..n)

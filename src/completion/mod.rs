@@ -68,7 +68,7 @@
 //!   problems", BIT 15, 1975.
 
 mod als;
-mod linalg;
+pub(crate) mod linalg;
 mod wiberg;
 
 use std::time::Instant;

@@ -1,0 +1,713 @@
+//! Projective factorization of partial track tables.
+//!
+//! # Model and objective
+//!
+//! Each frame is a projective camera `P_f` (3×4) and each track a homogeneous point
+//! `X_p ∈ P³`; the image of `X_p` in frame `f` is `π(P_f X_p)`, `π(a, b, c) = (a/c, b/c)`.
+//! The objective is the reprojection error in pixels over the observed entries only,
+//!
+//! ```text
+//!   E(P, X) = Σ_{(f,p) observed} ‖π(P_f X_p) − w_fp‖²,    RMS = sqrt(E / #observed scalars),
+//! ```
+//!
+//! defined up to a 4×4 homography `P → P H`, `X → H⁻¹ X` (15 degrees of freedom once the
+//! per-camera and per-point scales are fixed). Part 2 (self-calibration) upgrades it to a
+//! Euclidean reconstruction.
+//!
+//! # Pipeline ([`fit`])
+//!
+//! 1. **Hartley normalization** (Hartley 1997): image coordinates are translated to their
+//!    centroid and scaled so the mean distance from it is √2. The scaling is uniform, so the
+//!    optimum in normalized coordinates is the pixel optimum; all reported costs are in
+//!    pixels.
+//! 2. **Start.** Missing data: the affine optimum `W ≈ M S + t 1ᵀ` (rank3's damped Wiberg /
+//!    VarPro, which reaches it from random starts; [`crate::completion`]) gives
+//!    `P_f = [M_f t_f; 0 0 0 1]`, `X_p = (s_p, 1)`, the warm start of Hong, Zach, Fitzgibbon &
+//!    Cipolla (ECCV 2016). Complete data ([`Start::SturmTriggs`]): the projective depths
+//!    `λ_fp` are estimated by iterating Sturm & Triggs' factorization (ECCV 1996; iterated as
+//!    in Triggs 1996 and Mahamud & Hebert 2000): rescale `[λ_fp w_fp; λ_fp]` (3F×N) to
+//!    balance rows and columns, truncate it to rank 4 by SVD, `λ_fp ← (P_f X_p)₃`, repeat.
+//! 3. **Bridge** ([`Bridge::Pose`], the default): the pseudo object space error of Hong &
+//!    Zach (CVPR 2018), `(1 − η) ‖P₁₂X − (P₃X) w‖² + η ‖P₁₂X − w‖²` with `X = (x̃, 1)`, a
+//!    bilinear objective between the affine and the projective ones, minimised by variable
+//!    projection from the affine start ([`models::Pose`]).
+//! 4. **Projective bundle adjustment** ([`models::Projective`]): `E` itself, by sparse
+//!    Levenberg–Marquardt with the points eliminated (variable projection by default; see
+//!    [`bundle`]), cameras and points on their unit spheres.
+//!
+//! Why this chain, and not projective VarPro straight from the affine optimum, is measured in
+//! docs/results.md (`examples/projective_benchmark.rs`) and argued in docs/math.md.
+//!
+//! # Complexity
+//!
+//! Every stage after the start is linear in the observations per iteration except the
+//! factorisation of the sparse reduced camera system, whose cost follows the camera graph
+//! (banded for a video; see [`bundle`]). The Sturm–Triggs start is `O(F N)` per iteration
+//! (complete data: linear in the observations). No dense `F×F` or `(kF)²` matrix is formed
+//! unless every frame shares tracks with every other, where the reduced camera system is
+//! dense by nature.
+//!
+//! # References
+//!
+//! * P. Sturm and B. Triggs, "A factorization based algorithm for multi-image projective
+//!   structure and motion", ECCV 1996; B. Triggs, "Factorization methods for projective
+//!   structure and motion", CVPR 1996.
+//! * S. Mahamud and M. Hebert, "Iterative projective reconstruction from multiple views",
+//!   CVPR 2000.
+//! * R. Hartley, "In defense of the eight-point algorithm", PAMI 19(6), 1997.
+//! * J. H. Hong, C. Zach, A. Fitzgibbon and R. Cipolla, "Projective bundle adjustment from
+//!   arbitrary initialization using the variable projection method", ECCV 2016.
+//! * J. H. Hong and C. Zach, "pOSE: Pseudo object space error for initialization-free
+//!   bundle adjustment", CVPR 2018.
+
+pub mod bundle;
+pub mod models;
+mod sturm_triggs;
+
+use std::time::Instant;
+
+use faer::{Mat, MatRef};
+use nalgebra::{Matrix4, SymmetricEigen, Vector4};
+use serde::{Deserialize, Serialize};
+
+use crate::{Error, Event, Measurements, Observer, Result, SolverReport, SolverStatus};
+use bundle::{Graph, LmConfig, Progress};
+
+/// How the affine start reaches the projective bundle adjustment.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Bridge {
+    /// Projective bundle adjustment straight from the start.
+    Direct,
+    /// Minimise the pOSE objective with weight `eta` on the affine term first.
+    Pose { eta: f64 },
+}
+
+/// How the first projective estimate was obtained.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Start {
+    /// From the affine factorization (`P_f = [M_f t_f; 0 0 0 1]`).
+    Affine,
+    /// Iterated Sturm–Triggs depths (complete data).
+    SturmTriggs,
+}
+
+/// Settings of the projective stages. Every field has a documented default.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProjectiveConfig {
+    /// Default [`Bridge::Pose`] with `eta = 0.1` (chosen by measurement, docs/results.md).
+    pub bridge: Bridge,
+    /// Use the Sturm–Triggs start when the table is complete. Default true.
+    pub sturm_triggs: bool,
+    /// Sturm–Triggs iterations (depth updates). Default 30.
+    pub sturm_triggs_iterations: usize,
+    /// The pOSE stage's solver. Default: [`LmConfig::default`] (variable projection),
+    /// 200 iterations, relative tolerance 1e-10.
+    pub pose: LmConfig,
+    /// The projective bundle adjustment. Default: [`LmConfig::default`] (variable
+    /// projection, 300 iterations, relative tolerance 1e-12).
+    pub refine: LmConfig,
+}
+
+impl Default for ProjectiveConfig {
+    fn default() -> Self {
+        Self {
+            bridge: Bridge::Pose { eta: 0.1 },
+            sturm_triggs: true,
+            sturm_triggs_iterations: 30,
+            pose: LmConfig {
+                max_iterations: 200,
+                function_tolerance: 1e-10,
+                point_iterations: 1,
+                ..LmConfig::default()
+            },
+            refine: LmConfig::default(),
+        }
+    }
+}
+
+impl ProjectiveConfig {
+    /// Checks ranges; [`Error::InvalidConfig`] names the field.
+    pub fn validate(&self) -> Result<()> {
+        if let Bridge::Pose { eta } = self.bridge
+            && !(eta > 0.0 && eta <= 1.0)
+        {
+            return Err(Error::InvalidConfig {
+                field: "projective.bridge",
+                message: format!("pOSE weight eta = {eta} is not in (0, 1]"),
+            });
+        }
+        for (field, c) in [
+            ("projective.pose", &self.pose),
+            ("projective.refine", &self.refine),
+        ] {
+            if c.max_iterations == 0 {
+                return Err(Error::InvalidConfig {
+                    field,
+                    message: "max_iterations must be at least 1".into(),
+                });
+            }
+            if !(c.initial_lambda > 0.0 && c.initial_lambda.is_finite()) {
+                return Err(Error::InvalidConfig {
+                    field,
+                    message: format!("initial_lambda {} is not positive", c.initial_lambda),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A projective reconstruction in pixel coordinates: `w_fp ≃ P_f X_p`.
+///
+/// Gauge of the returned values: every `P_f` has unit Frobenius norm and every `X_p` unit
+/// norm, with signs chosen so that the depths `(P_f X_p)₃` are positive for most
+/// observations.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProjectiveModel {
+    /// Per frame, `P_f` row-major (3×4).
+    pub cameras: Vec<[f64; 12]>,
+    /// Per track, `X_p` (homogeneous).
+    pub points: Vec<[f64; 4]>,
+}
+
+impl ProjectiveModel {
+    /// `π(P_f X_p)`.
+    #[inline]
+    pub fn project(&self, f: usize, p: usize) -> [f64; 2] {
+        project(&self.cameras[f], &self.points[p])
+    }
+
+    /// `π(P_f X_p)` for every frame and track (2F×N).
+    pub fn predict(&self) -> Mat<f64> {
+        Mat::from_fn(2 * self.cameras.len(), self.points.len(), |r, p| {
+            self.project(r / 2, p)[r % 2]
+        })
+    }
+
+    /// RMS reprojection error over the observed scalars of `meas` (pixels).
+    pub fn rms(&self, meas: &Measurements) -> f64 {
+        let (mut ss, mut n) = (0.0, 0usize);
+        for (f, p) in meas.observed_pairs() {
+            let q = self.project(f, p);
+            ss += (q[0] - meas.w[(2 * f, p)]).powi(2) + (q[1] - meas.w[(2 * f + 1, p)]).powi(2);
+            n += 2;
+        }
+        if n == 0 { 0.0 } else { (ss / n as f64).sqrt() }
+    }
+
+    /// `P_f` as a 3×4 array of rows.
+    pub fn camera_matrix(&self, f: usize) -> [[f64; 4]; 3] {
+        let c = &self.cameras[f];
+        std::array::from_fn(|r| std::array::from_fn(|k| c[4 * r + k]))
+    }
+
+    /// Points of the tracks of `meas` (same frames as `self`) given the cameras: linear
+    /// triangulation (the smallest eigenvector of `Σ aᵀa` over the rows `x P₃ − P₁`,
+    /// `y P₃ − P₂`, in normalized coordinates) refined by Gauss–Newton on the reprojection
+    /// error. Tracks seen in fewer than 2 frames get NaN. `O(observations)`.
+    pub fn triangulate(&self, meas: &Measurements) -> Vec<[f64; 4]> {
+        let norm = Normalization::of(meas);
+        let g = graph(meas, &norm);
+        let cams: Vec<f64> = self
+            .cameras
+            .iter()
+            .flat_map(|c| {
+                let mut n = norm.camera_to_normalized(c);
+                bundle::normalize(&mut n);
+                n
+            })
+            .collect();
+        let mut pts = vec![0.0; 4 * meas.n_points()];
+        for p in 0..meas.n_points() {
+            let x = dlt_point(&g, &cams, p);
+            pts[4 * p..4 * p + 4].copy_from_slice(&x);
+        }
+        bundle::solve_points(&models::Projective, &g, &cams, &mut pts, 20);
+        (0..meas.n_points())
+            .map(|p| {
+                if g.track(p).len() < 2 {
+                    [f64::NAN; 4]
+                } else {
+                    std::array::from_fn(|k| pts[4 * p + k])
+                }
+            })
+            .collect()
+    }
+}
+
+#[inline]
+fn project(c: &[f64; 12], x: &[f64; 4]) -> [f64; 2] {
+    let d = c[8] * x[0] + c[9] * x[1] + c[10] * x[2] + c[11] * x[3];
+    [
+        (c[0] * x[0] + c[1] * x[1] + c[2] * x[2] + c[3] * x[3]) / d,
+        (c[4] * x[0] + c[5] * x[1] + c[6] * x[2] + c[7] * x[3]) / d,
+    ]
+}
+
+/// One stage's outcome.
+#[derive(Debug, Clone, Serialize)]
+pub struct StageReport {
+    /// `"sturm-triggs"`, `"pose"` or `"projective-ba"`.
+    pub stage: String,
+    pub status: SolverStatus,
+    pub iterations: usize,
+    /// RMS over observed scalars, pixels, before and after the stage (for `"pose"`: of the
+    /// pOSE objective's residuals, i.e. `sqrt(ℓ / #observed scalars)`).
+    pub rms_before_px: f64,
+    pub rms_after_px: f64,
+    pub seconds: f64,
+}
+
+/// Result of [`fit`].
+#[derive(Debug, Clone)]
+pub struct ProjectiveFit {
+    pub model: ProjectiveModel,
+    /// Final reprojection RMS over observed scalars, pixels.
+    pub rms_px: f64,
+    pub start: Start,
+    pub stages: Vec<StageReport>,
+    /// Report of the final (projective bundle adjustment) stage.
+    pub report: SolverReport,
+    /// Non-zeros of the reduced camera system's lower triangle.
+    pub schur_nnz: usize,
+}
+
+/// An affine factorization `W ≈ M S + t 1ᵀ` in pixels (M 2F×3, S 3×N, t length 2F), the
+/// warm start of [`fit`].
+#[derive(Debug, Clone, Copy)]
+pub struct AffineStart<'a> {
+    pub m: MatRef<'a, f64>,
+    pub s: MatRef<'a, f64>,
+    pub t: &'a [f64],
+}
+
+/// Hartley's similarity normalization of image coordinates: `w' = s (w − c)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Normalization {
+    pub centre: [f64; 2],
+    pub scale: f64,
+}
+
+impl Normalization {
+    /// Centroid of the observed points and the scale that makes their mean distance from it
+    /// √2 (1 for a single point or coincident points).
+    pub fn of(meas: &Measurements) -> Self {
+        let (mut cx, mut cy, mut n) = (0.0, 0.0, 0usize);
+        for (f, p) in meas.observed_pairs() {
+            cx += meas.w[(2 * f, p)];
+            cy += meas.w[(2 * f + 1, p)];
+            n += 1;
+        }
+        let n = n.max(1) as f64;
+        let (cx, cy) = (cx / n, cy / n);
+        let mut d = 0.0;
+        for (f, p) in meas.observed_pairs() {
+            d += ((meas.w[(2 * f, p)] - cx).powi(2) + (meas.w[(2 * f + 1, p)] - cy).powi(2)).sqrt();
+        }
+        let d = d / n;
+        let scale = if d > 0.0 && d.is_finite() {
+            std::f64::consts::SQRT_2 / d
+        } else {
+            1.0
+        };
+        Self {
+            centre: [cx, cy],
+            scale,
+        }
+    }
+
+    /// `T P` for `T = [s 0 −s cx; 0 s −s cy; 0 0 1]`.
+    pub fn camera_to_normalized(&self, c: &[f64; 12]) -> Vec<f64> {
+        let s = self.scale;
+        let mut out = c.to_vec();
+        for k in 0..4 {
+            out[k] = s * (c[k] - self.centre[0] * c[8 + k]);
+            out[4 + k] = s * (c[4 + k] - self.centre[1] * c[8 + k]);
+        }
+        out
+    }
+
+    /// `T⁻¹ P`.
+    pub fn camera_to_pixels(&self, c: &[f64]) -> [f64; 12] {
+        let s = self.scale;
+        let mut out = [0.0; 12];
+        for k in 0..4 {
+            out[k] = c[k] / s + self.centre[0] * c[8 + k];
+            out[4 + k] = c[4 + k] / s + self.centre[1] * c[8 + k];
+            out[8 + k] = c[8 + k];
+        }
+        out
+    }
+}
+
+/// The observations of `meas` in normalized coordinates, by track.
+fn graph(meas: &Measurements, norm: &Normalization) -> Graph {
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    let mut pt_ptr = Vec::with_capacity(np + 1);
+    let mut cam = Vec::new();
+    let mut w = Vec::new();
+    pt_ptr.push(0);
+    for p in 0..np {
+        for f in 0..nf {
+            if meas.is_visible(f, p) {
+                cam.push(f);
+                w.push([
+                    norm.scale * (meas.w[(2 * f, p)] - norm.centre[0]),
+                    norm.scale * (meas.w[(2 * f + 1, p)] - norm.centre[1]),
+                ]);
+            }
+        }
+        pt_ptr.push(cam.len());
+    }
+    Graph {
+        n_cams: nf,
+        n_pts: np,
+        pt_ptr,
+        cam,
+        w,
+    }
+}
+
+/// Linear triangulation of track `p` from unit-norm normalized cameras (flat, 12 per frame).
+fn dlt_point(g: &Graph, cams: &[f64], p: usize) -> [f64; 4] {
+    let mut a = Matrix4::<f64>::zeros();
+    for o in g.track(p) {
+        let c = &cams[12 * g.cam[o]..12 * g.cam[o] + 12];
+        let w = g.w[o];
+        for (row, wk) in [(0usize, w[0]), (4, w[1])] {
+            let v = Vector4::new(
+                wk * c[8] - c[row],
+                wk * c[9] - c[row + 1],
+                wk * c[10] - c[row + 2],
+                wk * c[11] - c[row + 3],
+            );
+            a += v * v.transpose();
+        }
+    }
+    let e = SymmetricEigen::new(a);
+    let k = e.eigenvalues.imin();
+    let x = e.eigenvectors.column(k);
+    [x[0], x[1], x[2], x[3]]
+}
+
+/// Checks that a projective model is determined by the observations: at least 2 frames,
+/// every frame seeing ≥ 6 tracks (11 parameters, 2 equations per track), every track seen
+/// in ≥ 2 frames, and at least 7 tracks in all (a fundamental matrix needs 7).
+pub fn check_observations(meas: &Measurements) -> Result<()> {
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    if nf < 2 {
+        return Err(Error::TooFew {
+            what: "frames for a projective reconstruction",
+            needed: 2,
+            have: nf,
+        });
+    }
+    if np < 7 {
+        return Err(Error::TooFew {
+            what: "tracks for a projective reconstruction",
+            needed: 7,
+            have: np,
+        });
+    }
+    let mut per_frame = vec![0usize; nf];
+    let mut per_track = vec![0usize; np];
+    for (f, p) in meas.observed_pairs() {
+        per_frame[f] += 1;
+        per_track[p] += 1;
+        if !(meas.w[(2 * f, p)].is_finite() && meas.w[(2 * f + 1, p)].is_finite()) {
+            return Err(Error::Degenerate(format!(
+                "observed value of track {p} in frame {f} is not finite"
+            )));
+        }
+    }
+    if let Some(&have) = per_frame.iter().min()
+        && have < 6
+    {
+        return Err(Error::TooFew {
+            what: "tracks seen in a frame (a projective camera has 11 degrees of freedom)",
+            needed: 6,
+            have,
+        });
+    }
+    if let Some(&have) = per_track.iter().min()
+        && have < 2
+    {
+        return Err(Error::TooFew {
+            what: "frames observing a track",
+            needed: 2,
+            have,
+        });
+    }
+    Ok(())
+}
+
+/// Projective reconstruction of `meas` from an affine factorization of the same
+/// observations (see the module documentation for the stages).
+///
+/// Errors: [`Error::TooFew`] / [`Error::Degenerate`] from [`check_observations`],
+/// [`Error::Dimension`] for an affine start of the wrong shape, [`Error::InvalidConfig`],
+/// and [`Error::Numerical`] if the reduced camera system cannot be analysed. How each stage
+/// ended is data in [`ProjectiveFit::stages`].
+pub fn fit(
+    meas: &Measurements,
+    affine: AffineStart<'_>,
+    cfg: &ProjectiveConfig,
+    run: usize,
+    observer: &mut dyn Observer,
+) -> Result<ProjectiveFit> {
+    cfg.validate()?;
+    check_observations(meas)?;
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    if affine.m.nrows() != 2 * nf
+        || affine.m.ncols() != 3
+        || affine.s.nrows() != 3
+        || affine.s.ncols() != np
+        || affine.t.len() != 2 * nf
+    {
+        return Err(Error::Dimension {
+            context: "projective fit: affine start",
+            expected: format!("M {}×3, S 3×{np}, t {}", 2 * nf, 2 * nf),
+            got: format!(
+                "M {}×{}, S {}×{}, t {}",
+                affine.m.nrows(),
+                affine.m.ncols(),
+                affine.s.nrows(),
+                affine.s.ncols(),
+                affine.t.len()
+            ),
+        });
+    }
+    let norm = Normalization::of(meas);
+    let g = graph(meas, &norm);
+    let px = 1.0 / norm.scale;
+    let n_scalars = (2 * g.n_obs()).max(1) as f64;
+    let mut stages = Vec::new();
+
+    // Start: cameras (12 per frame) and points (4 per track), normalized coordinates.
+    let (mut cams, mut pts, start) = if cfg.sturm_triggs && meas.is_complete() {
+        let t0 = Instant::now();
+        observer.on_event(&Event::StageStarted {
+            stage: "sturm-triggs",
+        });
+        let st = sturm_triggs::run(&g, cfg.sturm_triggs_iterations)?;
+        let mut c = st.cameras;
+        let mut x = st.points;
+        let before = (bundle::cost(&models::Projective, &g, &c, &x) / n_scalars).sqrt() * px;
+        for v in c.chunks_mut(12) {
+            bundle::normalize(v);
+        }
+        for v in x.chunks_mut(4) {
+            bundle::normalize(v);
+        }
+        let seconds = t0.elapsed().as_secs_f64();
+        observer.on_event(&Event::StageFinished {
+            stage: "sturm-triggs",
+            seconds,
+        });
+        stages.push(StageReport {
+            stage: "sturm-triggs".into(),
+            status: st.status,
+            iterations: st.iterations,
+            rms_before_px: f64::NAN,
+            rms_after_px: before,
+            seconds,
+        });
+        (c, x, Start::SturmTriggs)
+    } else {
+        let (c, x) = affine_start(&affine, &norm);
+        let (c, x) = match cfg.bridge {
+            Bridge::Direct => (c, x),
+            Bridge::Pose { eta } => {
+                let model = models::Pose { eta };
+                let (mut c, mut x) = (c, x);
+                let t0 = Instant::now();
+                observer.on_event(&Event::StageStarted { stage: "pose" });
+                let before = (bundle::cost(&model, &g, &c, &x) / n_scalars).sqrt() * px;
+                let r = bundle::minimize(
+                    &model,
+                    &g,
+                    &mut c,
+                    &mut x,
+                    &cfg.pose,
+                    &mut Progress {
+                        observer: &mut *observer,
+                        name: "pose",
+                        run,
+                        rms_scale: px * std::f64::consts::SQRT_2,
+                    },
+                )
+                .map_err(|message| Error::Numerical {
+                    stage: "pOSE",
+                    message,
+                })?;
+                let seconds = t0.elapsed().as_secs_f64();
+                observer.on_event(&Event::StageFinished {
+                    stage: "pose",
+                    seconds,
+                });
+                stages.push(StageReport {
+                    stage: "pose".into(),
+                    status: r.report.status,
+                    iterations: r.report.iterations,
+                    rms_before_px: before,
+                    rms_after_px: (r.report.final_cost / n_scalars).sqrt() * px,
+                    seconds,
+                });
+                (c, x)
+            }
+        };
+        // Projective parameters: unit-norm cameras and homogeneous points.
+        let mut cams = c;
+        for v in cams.chunks_mut(12) {
+            bundle::normalize(v);
+        }
+        let mut pts = Vec::with_capacity(4 * np);
+        for p in 0..np {
+            let mut v = [x[3 * p], x[3 * p + 1], x[3 * p + 2], 1.0];
+            bundle::normalize(&mut v);
+            pts.extend_from_slice(&v);
+        }
+        (cams, pts, Start::Affine)
+    };
+
+    let t0 = Instant::now();
+    observer.on_event(&Event::StageStarted {
+        stage: "projective-ba",
+    });
+    let before = (bundle::cost(&models::Projective, &g, &cams, &pts) / n_scalars).sqrt() * px;
+    let r = bundle::minimize(
+        &models::Projective,
+        &g,
+        &mut cams,
+        &mut pts,
+        &cfg.refine,
+        &mut Progress {
+            observer: &mut *observer,
+            name: "projective-ba",
+            run,
+            rms_scale: px,
+        },
+    )
+    .map_err(|message| Error::Numerical {
+        stage: "projective bundle adjustment",
+        message,
+    })?;
+    let seconds = t0.elapsed().as_secs_f64();
+    observer.on_event(&Event::StageFinished {
+        stage: "projective-ba",
+        seconds,
+    });
+    let rms_px = (r.report.final_cost / n_scalars).sqrt() * px;
+    stages.push(StageReport {
+        stage: "projective-ba".into(),
+        status: r.report.status,
+        iterations: r.report.iterations,
+        rms_before_px: before,
+        rms_after_px: rms_px,
+        seconds,
+    });
+    let model = to_pixels(&cams, &pts, &g, &norm);
+    Ok(ProjectiveFit {
+        model,
+        rms_px,
+        start,
+        stages,
+        report: r.report,
+        schur_nnz: r.schur_nnz,
+    })
+}
+
+/// `P_f = T [M_f t_f; 0 0 0 1] H`, `X_p = H⁻¹ (s_p, 1)` with `H` centring and scaling the
+/// affine points to unit RMS (conditioning), in normalized image coordinates. Returns
+/// (cameras 12 per frame, points 3 per track: the pOSE parameterisation).
+fn affine_start(a: &AffineStart<'_>, norm: &Normalization) -> (Vec<f64>, Vec<f64>) {
+    let (nf, np) = (a.m.nrows() / 2, a.s.ncols());
+    let mu: [f64; 3] =
+        std::array::from_fn(|k| (0..np).map(|p| a.s[(k, p)]).sum::<f64>() / np.max(1) as f64);
+    let spread = ((0..np)
+        .map(|p| (0..3).map(|k| (a.s[(k, p)] - mu[k]).powi(2)).sum::<f64>())
+        .sum::<f64>()
+        / np.max(1) as f64)
+        .sqrt();
+    let sigma = if spread > 0.0 && spread.is_finite() {
+        spread
+    } else {
+        1.0
+    };
+    let mut cams = Vec::with_capacity(12 * nf);
+    for f in 0..nf {
+        let mut c = [0.0; 12];
+        for r in 0..2 {
+            let row = 2 * f + r;
+            let mut shift = a.t[row];
+            for k in 0..3 {
+                c[4 * r + k] = a.m[(row, k)] * sigma;
+                shift += a.m[(row, k)] * mu[k];
+            }
+            c[4 * r + 3] = shift;
+        }
+        c[11] = 1.0;
+        cams.extend(norm.camera_to_normalized(&c));
+    }
+    let mut pts = Vec::with_capacity(3 * np);
+    for p in 0..np {
+        for k in 0..3 {
+            pts.push((a.s[(k, p)] - mu[k]) / sigma);
+        }
+    }
+    (cams, pts)
+}
+
+/// Cameras to pixels, unit norms, and the sign convention of [`ProjectiveModel`].
+fn to_pixels(cams: &[f64], pts: &[f64], g: &Graph, norm: &Normalization) -> ProjectiveModel {
+    let mut cameras: Vec<[f64; 12]> = cams
+        .chunks(12)
+        .map(|c| {
+            let mut p = norm.camera_to_pixels(c);
+            bundle::normalize(&mut p);
+            p
+        })
+        .collect();
+    let mut points: Vec<[f64; 4]> = pts
+        .chunks(4)
+        .map(|x| {
+            let mut v = [x[0], x[1], x[2], x[3]];
+            bundle::normalize(&mut v);
+            v
+        })
+        .collect();
+    let depth =
+        |c: &[f64; 12], x: &[f64; 4]| c[8] * x[0] + c[9] * x[1] + c[10] * x[2] + c[11] * x[3];
+    // Points: positive depth in the majority of their frames; then cameras likewise.
+    for p in 0..g.n_pts {
+        let neg = g
+            .track(p)
+            .filter(|&o| depth(&cameras[g.cam[o]], &points[p]) < 0.0)
+            .count();
+        if 2 * neg > g.track(p).len() {
+            points[p].iter_mut().for_each(|v| *v = -*v);
+        }
+    }
+    let mut neg = vec![0isize; g.n_cams];
+    for p in 0..g.n_pts {
+        for o in g.track(p) {
+            let f = g.cam[o];
+            neg[f] += if depth(&cameras[f], &points[p]) < 0.0 {
+                1
+            } else {
+                -1
+            };
+        }
+    }
+    for (f, c) in cameras.iter_mut().enumerate() {
+        if neg[f] > 0 {
+            c.iter_mut().for_each(|v| *v = -*v);
+        }
+    }
+    ProjectiveModel { cameras, points }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,100 @@
+use super::*;
+use crate::NoopObserver;
+use crate::completion::{self, CompletionConfig};
+use nalgebra::{Rotation3, Vector3};
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+
+/// A perspective scene: points in a unit cube, cameras at distance `d` looking at the
+/// origin, focal 600 px, principal point (320, 240). Each track visible in a contiguous
+/// window when `missing` > 0.
+pub(super) fn scene(
+    nf: usize,
+    np: usize,
+    d: f64,
+    missing: f64,
+    seed: u64,
+) -> (Measurements, Vec<[f64; 12]>, Vec<[f64; 4]>) {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let pts: Vec<Vector3<f64>> = (0..np)
+        .map(|_| {
+            Vector3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+        })
+        .collect();
+    let mut cams = Vec::new();
+    for f in 0..nf {
+        let a = f as f64 / nf as f64;
+        let r = Rotation3::from_euler_angles(0.3 * (3.0 * a).sin(), -0.6 + 1.2 * a, 0.1 * a);
+        let t = Vector3::new(0.2 * a, -0.1, d);
+        let k = nalgebra::Matrix3::new(600.0, 0.0, 320.0, 0.0, 600.0, 240.0, 0.0, 0.0, 1.0);
+        let rt = nalgebra::Matrix3x4::from_columns(&[
+            r.matrix().column(0).into(),
+            r.matrix().column(1).into(),
+            r.matrix().column(2).into(),
+            t,
+        ]);
+        let p = k * rt;
+        cams.push(std::array::from_fn(|i| p[(i / 4, i % 4)]));
+    }
+    let mut w = Mat::zeros(2 * nf, np);
+    let mut vis = vec![true; nf * np];
+    for p in 0..np {
+        let x = [pts[p][0], pts[p][1], pts[p][2], 1.0];
+        let (lo, hi) = if missing > 0.0 {
+            let len = ((nf as f64 * (1.0 - missing)).round() as usize).clamp(3, nf);
+            let lo = rng.random_range(0..=nf - len);
+            (lo, lo + len)
+        } else {
+            (0, nf)
+        };
+        for f in 0..nf {
+            let q = project(&cams[f], &x);
+            w[(2 * f, p)] = q[0];
+            w[(2 * f + 1, p)] = q[1];
+            vis[f * np + p] = f >= lo && f < hi;
+        }
+    }
+    let points = pts.iter().map(|v| [v[0], v[1], v[2], 1.0]).collect();
+    (Measurements::new(w, vis), cams, points)
+}
+
+fn affine_fit(meas: &Measurements) -> crate::completion::Completion {
+    completion::complete(meas, &CompletionConfig::default(), &mut NoopObserver).unwrap()
+}
+
+fn run(meas: &Measurements, cfg: &ProjectiveConfig) -> ProjectiveFit {
+    let c = affine_fit(meas);
+    fit(
+        meas,
+        AffineStart {
+            m: c.m.as_ref(),
+            s: c.s.as_ref(),
+            t: &c.t,
+        },
+        cfg,
+        0,
+        &mut NoopObserver,
+    )
+    .unwrap()
+}
+
+#[test]
+fn noise_free_complete_scene_is_fitted_exactly() {
+    let (meas, _, _) = scene(12, 60, 3.0, 0.0, 1);
+    let fit = run(&meas, &ProjectiveConfig::default());
+    eprintln!("{:?}", fit.stages);
+    assert!(fit.rms_px < 1e-9, "rms {}", fit.rms_px);
+    assert!((fit.model.rms(&meas) - fit.rms_px).abs() < 1e-9);
+}
+
+#[test]
+fn noise_free_missing_scene_is_fitted_exactly() {
+    let (meas, _, _) = scene(20, 120, 3.0, 0.5, 2);
+    let fit = run(&meas, &ProjectiveConfig::default());
+    eprintln!("{:?}", fit.stages);
+    assert!(fit.rms_px < 1e-9, "rms {}", fit.rms_px);
+}
