@@ -35,6 +35,8 @@ enum Command {
 enum CameraArg {
     Orthographic,
     ScaledOrthographic,
+    /// Pinhole perspective camera `K [R | t]` (for `rank3 synth`).
+    Perspective,
 }
 
 impl From<CameraArg> for CameraModel {
@@ -42,6 +44,7 @@ impl From<CameraArg> for CameraModel {
         match c {
             CameraArg::Orthographic => CameraModel::Orthographic,
             CameraArg::ScaledOrthographic => CameraModel::ScaledOrthographic,
+            CameraArg::Perspective => CameraModel::Perspective,
         }
     }
 }
@@ -138,8 +141,18 @@ struct SynthArgs {
     /// Image noise σ, pixels.
     #[arg(long, default_value_t = 0.5)]
     noise: f64,
+    /// Camera: orthographic, scaled orthographic (weak perspective) or pinhole perspective
+    /// (truth.json then also holds each frame's K, R, t, P and camera centre).
     #[arg(long, value_enum, default_value = "orthographic")]
     camera: CameraArg,
+    /// Focal length of the perspective camera, pixels [default: DISTANCE · 200, so that the
+    /// object spans about 400 px].
+    #[arg(long, value_name = "PX")]
+    focal: Option<f64>,
+    /// Distance of the perspective camera from the object's centre, in object radii
+    /// (> 1.2; 2–3 is strong perspective, 20 or more nearly weak perspective).
+    #[arg(long, value_name = "D", default_value_t = rank3::synth::DEFAULT_DISTANCE)]
+    distance: f64,
     #[arg(long, value_enum, default_value = "house")]
     shape: ShapeArg,
     #[arg(long, value_enum, default_value = "turntable")]
@@ -338,6 +351,8 @@ fn synth(a: &SynthArgs) -> Result<(), rank3::Error> {
         },
         gross: a.gross,
         seed: a.seed,
+        focal: a.focal,
+        distance: a.distance,
         ..SynthConfig::default()
     };
     let scene = rank3::synth::generate(&cfg)?;
