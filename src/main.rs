@@ -33,9 +33,14 @@ enum Command {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum CameraArg {
+    /// Orthographic projection (affine, unit scale).
     Orthographic,
+    /// Scaled orthographic / weak perspective (affine, one scale per frame).
     ScaledOrthographic,
-    /// Pinhole perspective camera `K [R | t]` (for `rank3 synth`).
+    /// Projective camera `w ≃ P X` (3×4 P per frame, homogeneous points; up to a 4×4
+    /// homography). Not for `synth`.
+    Projective,
+    /// Pinhole perspective camera `K [R | t]` (`synth` only for now).
     Perspective,
 }
 
@@ -45,6 +50,7 @@ impl From<CameraArg> for CameraModel {
             CameraArg::Orthographic => CameraModel::Orthographic,
             CameraArg::ScaledOrthographic => CameraModel::ScaledOrthographic,
             CameraArg::Perspective => CameraModel::Perspective,
+            CameraArg::Projective => CameraModel::Projective,
         }
     }
 }
@@ -56,7 +62,8 @@ struct ReconstructArgs {
     /// Output directory (reconstruction.json, completed.txt, points.ply).
     #[arg(long)]
     out: PathBuf,
-    /// Metric camera model.
+    /// Camera model: orthographic, scaled-orthographic or projective (the projective
+    /// reconstruction also holds the affine model it starts from).
     #[arg(long, value_enum, default_value = "orthographic")]
     camera: CameraArg,
     #[command(flatten)]
@@ -315,6 +322,27 @@ fn print_summary(rec: &Reconstruction, out: &Path) {
             "refinement: RMS {:.6} → {:.6} px ({:?}, {} iterations, {:.3} s)",
             r.rms_before_px, r.rms_after_px, r.status, r.iterations, r.seconds
         );
+    }
+    if let Some(j) = rec.robust.as_ref().and_then(|r| r.projective.as_ref()) {
+        eprintln!(
+            "projective verdict: {} track(s) readmitted, {} rejected, flagged entries {} → {} \
+             (σ ≈ {:.3} px, entry threshold {:.3} px), {} refit(s)",
+            j.readmitted_tracks,
+            j.rejected_tracks,
+            j.flagged_before,
+            j.flagged_after,
+            j.noise_sigma_px,
+            j.entry_threshold_px,
+            j.refits
+        );
+    }
+    if let Some(p) = &rec.projective {
+        for s in &p.stages {
+            eprintln!(
+                "projective {}: RMS {:.6} → {:.6} px ({:?}, {} iterations, {:.3} s)",
+                s.stage, s.rms_before_px, s.rms_after_px, s.status, s.iterations, s.seconds
+            );
+        }
     }
     println!(
         "{} camera, {} frames, {} points, RMS {:.6} px → {}",

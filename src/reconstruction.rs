@@ -28,6 +28,7 @@ use rand::SeedableRng;
 
 use crate::completion::{self, CompletionConfig, CompletionModel, CompletionSolverKind};
 use crate::metric::{self, MetricConfig, MetricUpgrade};
+use crate::projective::{self, ProjectiveConfig, ProjectiveModel};
 use crate::refine::{self, RefineConfig, RefineResult};
 use crate::robust::{self, RobustConfig};
 use crate::svd::{self, SvdMethod, TruncatedSvdConfig};
@@ -62,6 +63,8 @@ pub struct Config {
     pub seed: u64,
     /// Levenberg–Marquardt refinement; `None` skips it. Default on.
     pub refine: Option<RefineConfig>,
+    /// The projective stages, used with [`CameraModel::Projective`].
+    pub projective: ProjectiveConfig,
     /// Warn "far from rank 3" when σ4/σ3 exceeds this. Default 0.1.
     pub rank3_warning_ratio: f64,
     /// Warn "close to rank 2" when σ3/σ2 is below this. Default 0.05.
@@ -91,6 +94,7 @@ impl Default for Config {
             completion: CompletionConfig::default(),
             seed: 0,
             refine: Some(RefineConfig::default()),
+            projective: ProjectiveConfig::default(),
             rank3_warning_ratio: 0.1,
             rank2_warning_ratio: 0.05,
         }
@@ -171,6 +175,10 @@ pub struct RobustReport {
     /// Entry-level gross-error threshold, pixels.
     pub entry_threshold_px: f64,
     pub iterations: usize,
+    /// With the projective camera: how the projective model judged the tracks again
+    /// ([`crate::projective::verdict`]); the lists and counts above are then its verdict,
+    /// and `noise_sigma_px` / `entry_threshold_px` its estimates.
+    pub projective: Option<ProjectiveJudgement>,
     /// Best inlier count after each RANSAC iteration (for the recording).
     #[serde(skip)]
     pub inliers_per_iteration: Vec<usize>,
@@ -178,6 +186,55 @@ pub struct RobustReport {
     #[serde(skip)]
     pub flagged_indices: Vec<(usize, usize)>,
     pub seconds: f64,
+}
+
+/// What the projective verdict changed in the affine robust pass's selection.
+#[derive(Debug, Clone, Serialize)]
+pub struct ProjectiveJudgement {
+    /// Tracks rejected by the affine pass that the projective model explains.
+    pub readmitted_tracks: usize,
+    /// Tracks kept by the affine pass that the projective model rejects.
+    pub rejected_tracks: usize,
+    /// Flagged entries before and after.
+    pub flagged_before: usize,
+    pub flagged_after: usize,
+    /// Entry noise σ_e and entry threshold under the projective model, pixels.
+    pub noise_sigma_px: f64,
+    pub entry_threshold_px: f64,
+    /// How many times the fit was run again with a new selection (at most 3).
+    pub refits: usize,
+}
+
+impl RobustReport {
+    /// Sets the lists and counts from an inlier flag per kept track and flagged entries
+    /// (indices into the kept table, mapped to the input's by `kept_frames`/`kept_tracks`).
+    fn update(
+        &mut self,
+        kept: &TrackTable,
+        kept_frames: &[usize],
+        kept_tracks: &[usize],
+        inlier: &[bool],
+        flagged: &[(usize, usize)],
+    ) {
+        self.outlier_tracks = (0..kept.n_tracks())
+            .filter(|&p| !inlier[p])
+            .map(|p| kept.track_ids()[p].clone())
+            .collect();
+        self.flagged_entries = flagged
+            .iter()
+            .map(|&(f, p)| EntryId {
+                frame: kept.frame_ids()[f].clone(),
+                track: kept.track_ids()[p].clone(),
+            })
+            .collect();
+        self.n_inlier_tracks = inlier.iter().filter(|&&b| b).count();
+        self.n_outlier_tracks = inlier.len() - self.n_inlier_tracks;
+        self.n_flagged_entries = flagged.len();
+        self.flagged_indices = flagged
+            .iter()
+            .map(|&(f, p)| (kept_frames[f], kept_tracks[p]))
+            .collect();
+    }
 }
 
 /// The refinement's report.
@@ -188,6 +245,138 @@ pub struct RefinementReport {
     pub status: SolverStatus,
     pub iterations: usize,
     pub seconds: f64,
+}
+
+/// One frame's projective camera.
+#[derive(Debug, Clone, Serialize)]
+pub struct ProjectiveFrame {
+    pub frame: Id,
+    /// `P_f` (3×4, rows), unit Frobenius norm, pixels: `w ≃ P_f X`.
+    pub p: [[f64; 4]; 3],
+    /// RMS reprojection error of this frame's observations, pixels.
+    pub rms_px: f64,
+    pub n_observations: usize,
+}
+
+/// One track's homogeneous point.
+#[derive(Debug, Clone, Serialize)]
+pub struct ProjectivePoint {
+    pub track: Id,
+    /// `X_p` (homogeneous, unit norm; NaN when it cannot be triangulated).
+    pub x: [f64; 4],
+    pub inlier: bool,
+    pub rms_px: f64,
+    pub n_observations: usize,
+}
+
+/// The projective reconstruction: `w_fp ≃ P_f X_p`, defined up to a 4×4 homography.
+#[derive(Debug, Clone, Serialize)]
+pub struct ProjectiveResult {
+    /// Reprojection RMS over the fit's observed scalars, pixels.
+    pub rms_px: f64,
+    pub start: projective::Start,
+    pub stages: Vec<projective::StageReport>,
+    pub cameras: Vec<ProjectiveFrame>,
+    /// In the input's track order (fitted tracks and outlier tracks, as `points`).
+    pub points: Vec<ProjectivePoint>,
+    /// Non-zeros of the reduced camera system (lower triangle) of the bundle adjustment.
+    pub schur_nnz: usize,
+    /// The fitted model (fit frames × fit tracks), for library users.
+    #[serde(skip)]
+    pub model: projective::ProjectiveModel,
+    /// Points of the outlier tracks given the fitted cameras (triangulated, not refined).
+    #[serde(skip)]
+    pub outlier_points: Vec<[f64; 4]>,
+}
+
+impl ProjectiveResult {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        pf: projective::ProjectiveFit,
+        fit: &TrackTable,
+        meas: &Measurements,
+        outlier_meas: &Measurements,
+        outlier_kept: &[usize],
+        kept: &TrackTable,
+        kept_tracks: &[usize],
+        used_tracks: &[usize],
+    ) -> Self {
+        let model = pf.model;
+        let outlier_points = ProjectiveModel {
+            cameras: model.cameras.clone(),
+            points: Vec::new(),
+        }
+        .triangulate(outlier_meas);
+        let residuals = |m: &Measurements, x: &[f64; 4], p: usize| -> (f64, usize) {
+            let mut ss = 0.0;
+            let mut n = 0;
+            for f in 0..m.n_frames() {
+                if m.is_visible(f, p) {
+                    let q = projective::project(&model.cameras[f], x);
+                    ss += (q[0] - m.w[(2 * f, p)]).powi(2) + (q[1] - m.w[(2 * f + 1, p)]).powi(2);
+                    n += 1;
+                }
+            }
+            (ss, n)
+        };
+        let cameras = (0..fit.n_frames())
+            .map(|f| {
+                let (mut ss, mut n) = (0.0, 0);
+                for p in 0..meas.n_points() {
+                    if meas.is_visible(f, p) {
+                        let q = model.project(f, p);
+                        ss += (q[0] - meas.w[(2 * f, p)]).powi(2)
+                            + (q[1] - meas.w[(2 * f + 1, p)]).powi(2);
+                        n += 1;
+                    }
+                }
+                ProjectiveFrame {
+                    frame: fit.frame_ids()[f].clone(),
+                    p: model.camera_matrix(f),
+                    rms_px: rms_of(ss, n),
+                    n_observations: n,
+                }
+            })
+            .collect();
+        let mut points: Vec<(usize, ProjectivePoint)> = Vec::new();
+        for (p, &input_p) in used_tracks.iter().enumerate() {
+            let (ss, n) = residuals(meas, &model.points[p], p);
+            points.push((
+                input_p,
+                ProjectivePoint {
+                    track: fit.track_ids()[p].clone(),
+                    x: model.points[p],
+                    inlier: true,
+                    rms_px: rms_of(ss, n),
+                    n_observations: n,
+                },
+            ));
+        }
+        for (k, &p) in outlier_kept.iter().enumerate() {
+            let (ss, n) = residuals(outlier_meas, &outlier_points[k], k);
+            points.push((
+                kept_tracks[p],
+                ProjectivePoint {
+                    track: kept.track_ids()[p].clone(),
+                    x: outlier_points[k],
+                    inlier: false,
+                    rms_px: rms_of(ss, n),
+                    n_observations: n,
+                },
+            ));
+        }
+        points.sort_by_key(|(i, _)| *i);
+        Self {
+            rms_px: pf.rms_px,
+            start: pf.start,
+            stages: pf.stages,
+            cameras,
+            points: points.into_iter().map(|(_, p)| p).collect(),
+            schur_nnz: pf.schur_nnz,
+            model,
+            outlier_points,
+        }
+    }
 }
 
 /// Input summary.
@@ -214,8 +403,11 @@ pub struct Reconstruction {
     pub camera_model: CameraModel,
     pub frames: Vec<FrameResult>,
     pub points: Vec<PointResult>,
-    /// `sqrt(Σ_observed r² / #observed scalars)` of the final metric model, pixels.
+    /// `sqrt(Σ_observed r² / #observed scalars)` of the final model, pixels: the projective
+    /// model's with the projective camera, the metric model's otherwise.
     pub rms_px: f64,
+    /// The same RMS of the metric (affine-family) model in `frames` / `points`, pixels.
+    pub metric_rms_px: f64,
     pub metric_upgrade: MetricUpgrade,
     /// Every singular value the factorization computed, descending.
     pub singular_values: Vec<f64>,
@@ -227,6 +419,10 @@ pub struct Reconstruction {
     /// Present when the robust pass ran.
     pub robust: Option<RobustReport>,
     pub refinement: Option<RefinementReport>,
+    /// Present with the projective camera: `P_f`, `X_p` and the stages' reports. `frames`
+    /// and `points` then hold the scaled-orthographic model the projective stages start
+    /// from.
+    pub projective: Option<ProjectiveResult>,
     pub input: InputSummary,
     /// Tracks and frames not used, with reasons.
     pub set_aside: Vec<SetAside>,
@@ -336,11 +532,7 @@ impl Reconstruction {
         let mut warnings = Vec::new();
         // An affine camera (2×4) needs 4 points per frame when it is estimated jointly with
         // the translation (missing data); centering needs only 3.
-        let min_points = if table.is_complete() {
-            config.min_points_per_frame
-        } else {
-            config.min_points_per_frame.max(4)
-        };
+        let min_points = min_points_per_frame(config, table.is_complete());
         let (kept, mut set_aside, kept_frames, kept_tracks) = timer.run("set-aside", |_| {
             table.set_aside(config.min_frames_per_track, min_points)
         });
@@ -368,77 +560,152 @@ impl Reconstruction {
                 inlier_fraction,
                 rival_fraction,
                 min_inlier_fraction,
-            } = r.verdict
+            } = &r.verdict
             {
-                return Err(Error::NoRigidMajority {
-                    reason: format!("{reason:?}"),
-                    inlier_fraction,
-                    rival_fraction,
-                    min_inlier_fraction,
-                });
+                if config.camera != CameraModel::Projective {
+                    return Err(Error::NoRigidMajority {
+                        reason: format!("{reason:?}"),
+                        inlier_fraction: *inlier_fraction,
+                        rival_fraction: *rival_fraction,
+                        min_inlier_fraction: *min_inlier_fraction,
+                    });
+                }
+                // Perspective splits the tracks into affine groups: the projective model
+                // judges them instead, starting from all of them.
+                warnings.push(format!(
+                    "the affine robust pass found no rigid majority ({reason:?}: best group \
+                     {:.0} %, rival {:.0} %); the projective model judges the tracks instead",
+                    100.0 * inlier_fraction,
+                    100.0 * rival_fraction
+                ));
+            } else {
+                inlier.clone_from(&r.inlier_tracks);
+                flagged.clone_from(&r.flagged_entries);
             }
-            inlier.clone_from(&r.inlier_tracks);
-            flagged.clone_from(&r.flagged_entries);
-            robust_report = Some(RobustReport {
-                outlier_tracks: (0..kept.n_tracks())
-                    .filter(|&p| !inlier[p])
-                    .map(|p| kept.track_ids()[p].clone())
-                    .collect(),
-                flagged_entries: flagged
-                    .iter()
-                    .map(|&(f, p)| EntryId {
-                        frame: kept.frame_ids()[f].clone(),
-                        track: kept.track_ids()[p].clone(),
-                    })
-                    .collect(),
-                n_inlier_tracks: inlier.iter().filter(|&&b| b).count(),
-                n_outlier_tracks: inlier.iter().filter(|&&b| !b).count(),
-                n_flagged_entries: flagged.len(),
+            let mut report = RobustReport {
+                outlier_tracks: Vec::new(),
+                flagged_entries: Vec::new(),
+                n_inlier_tracks: 0,
+                n_outlier_tracks: 0,
+                n_flagged_entries: 0,
                 noise_sigma_px: r.noise_sigma,
                 threshold_px: r.threshold_px,
                 entry_threshold_px: r.entry_threshold_px,
                 iterations: r.iterations,
+                projective: None,
                 inliers_per_iteration: counts,
-                flagged_indices: flagged
-                    .iter()
-                    .map(|&(f, p)| (kept_frames[f], kept_tracks[p]))
-                    .collect(),
+                flagged_indices: Vec::new(),
                 seconds,
-            });
-            let n_out = inlier.iter().filter(|&&b| !b).count();
-            if n_out > 0 || !flagged.is_empty() {
-                warnings.push(format!(
-                    "robust pass: {n_out} outlier track(s) and {} gross entr{} excluded from \
-                     the fit",
-                    flagged.len(),
-                    if flagged.len() == 1 { "y" } else { "ies" }
-                ));
-            }
+            };
+            report.update(&kept, &kept_frames, &kept_tracks, &inlier, &flagged);
+            robust_report = Some(report);
         }
 
-        // The table the fit uses: inlier tracks, flagged entries hidden, set aside again
-        // (hiding entries can starve a track or a frame).
-        let inlier_idx: Vec<usize> = (0..kept.n_tracks()).filter(|&p| inlier[p]).collect();
-        let all_frames: Vec<usize> = (0..kept.n_frames()).collect();
-        let mut fit_table = kept.select(&all_frames, &inlier_idx);
-        let mut pos = vec![usize::MAX; kept.n_tracks()];
-        for (k, &p) in inlier_idx.iter().enumerate() {
-            pos[p] = k;
-        }
-        for &(f, p) in &flagged {
-            if pos[p] != usize::MAX {
-                fit_table.unset(f, pos[p]);
+        let mut fitted = fit_selection(
+            &kept,
+            &kept_frames,
+            &kept_tracks,
+            &inlier,
+            &flagged,
+            config,
+            &mut timer,
+        )?;
+
+        // The projective model judges the tracks again (the affine pass cannot explain
+        // perspective), refitting while its verdict changes (at most
+        // `PROJECTIVE_VERDICT_ROUNDS` times).
+        if let (Some(rc), Some(report)) = (&config.robust, robust_report.as_mut())
+            && config.camera == CameraModel::Projective
+        {
+            let before = inlier.clone();
+            let flagged_before = flagged.len();
+            let mut refits = 0;
+            let mut last = None;
+            while let Some(pf) = &fitted.projective {
+                let v = projective_verdict(&kept, &fitted, pf, &flagged, rc);
+                let changed = v.0 != inlier || v.1 != flagged;
+                last = Some((v.2, v.3));
+                if !changed || refits == PROJECTIVE_VERDICT_ROUNDS {
+                    break;
+                }
+                let n_in = v.0.iter().filter(|&&b| b).count();
+                if n_in < 7 {
+                    warnings.push(format!(
+                        "the projective verdict keeps {n_in} track(s): too few to refit; the \
+                         previous selection is kept"
+                    ));
+                    break;
+                }
+                inlier = v.0;
+                flagged = v.1;
+                fitted = fit_selection(
+                    &kept,
+                    &kept_frames,
+                    &kept_tracks,
+                    &inlier,
+                    &flagged,
+                    config,
+                    &mut timer,
+                )?;
+                refits += 1;
             }
+            let n_in = inlier.iter().filter(|&&b| b).count();
+            let fraction = n_in as f64 / inlier.len().max(1) as f64;
+            if fraction < rc.min_inlier_fraction {
+                return Err(Error::NoRigidMajority {
+                    reason: "projective verdict".into(),
+                    inlier_fraction: fraction,
+                    rival_fraction: 0.0,
+                    min_inlier_fraction: rc.min_inlier_fraction,
+                });
+            }
+            let (sigma, tau) = last.unwrap_or((f64::NAN, f64::NAN));
+            report.update(&kept, &kept_frames, &kept_tracks, &inlier, &flagged);
+            report.noise_sigma_px = sigma;
+            report.entry_threshold_px = tau;
+            report.projective = Some(ProjectiveJudgement {
+                readmitted_tracks: (0..inlier.len())
+                    .filter(|&p| inlier[p] && !before[p])
+                    .count(),
+                rejected_tracks: (0..inlier.len())
+                    .filter(|&p| !inlier[p] && before[p])
+                    .count(),
+                flagged_before,
+                flagged_after: flagged.len(),
+                noise_sigma_px: sigma,
+                entry_threshold_px: tau,
+                refits,
+            });
         }
-        let min_points = if fit_table.is_complete() {
-            min_points
-        } else {
-            min_points.max(4)
-        };
-        let (fit, aside2, fit_frames, fit_tracks) =
-            fit_table.set_aside(config.min_frames_per_track, min_points);
+        if let Some(r) = &robust_report
+            && (r.n_outlier_tracks > 0 || r.n_flagged_entries > 0)
+        {
+            warnings.push(format!(
+                "robust pass: {} outlier track(s) and {} gross entr{} excluded from the fit",
+                r.n_outlier_tracks,
+                r.n_flagged_entries,
+                if r.n_flagged_entries == 1 { "y" } else { "ies" }
+            ));
+        }
+        let Fitted {
+            fit,
+            meas,
+            set_aside: aside2,
+            fit_frames,
+            used_frames,
+            used_tracks,
+            outlier_kept,
+            affine,
+            completion_report,
+            upgrade,
+            model,
+            refinement,
+            mirrored,
+            projective,
+            warnings: fit_warnings,
+            ..
+        } = fitted;
         set_aside.extend(aside2);
-        check_size(&fit)?;
         if !set_aside.is_empty() {
             warnings.push(format!(
                 "{} track(s) and {} frame(s) set aside (see `set_aside`)",
@@ -452,68 +719,15 @@ impl Reconstruction {
                     .count()
             ));
         }
-        // Indices into the input table of the frames and tracks the fit uses, and of the
-        // outlier tracks (reported with inlier = false).
-        let used_frames: Vec<usize> = fit_frames.iter().map(|&f| kept_frames[f]).collect();
-        let used_tracks: Vec<usize> = fit_tracks
-            .iter()
-            .map(|&k| kept_tracks[inlier_idx[k]])
-            .collect();
-        let outlier_kept: Vec<usize> = (0..kept.n_tracks()).filter(|&p| !inlier[p]).collect();
-        let meas = fit.measurements();
-        timer.observer.on_event(&Event::FitSelection {
-            frames: &used_frames,
-            tracks: &used_tracks,
-        });
-
-        let mut completion_report = None;
-        let affine = timer.run("factorize", |obs| -> Result<Affine> {
-            if meas.is_complete() {
-                factorize_complete(&meas, &config.svd)
+        warnings.extend(fit_warnings);
+        let rank_ratio = {
+            let sv = &affine.singular_values;
+            if sv.len() >= 4 && sv[2] > 0.0 {
+                sv[3] / sv[2]
             } else {
-                let c = completion::complete(&meas, &config.completion, obs)?;
-                completion_report = Some(CompletionReport {
-                    solver: c.solver,
-                    model: c.model,
-                    rms_px: c.rms,
-                    status: c.report.status,
-                    iterations: c.report.iterations,
-                    runs: c.runs.len(),
-                    seconds: c.report.seconds,
-                });
-                factorization_from_completion(&meas, c)
+                f64::NAN
             }
-        })?;
-        if let Some(c) = &completion_report
-            && c.status != SolverStatus::Converged
-        {
-            warnings.push(format!(
-                "missing-data completion ended with status {:?} after {} iterations",
-                c.status, c.iterations
-            ));
-        }
-        let sv = &affine.singular_values;
-        let rank_ratio = if sv.len() >= 4 && sv[2] > 0.0 {
-            sv[3] / sv[2]
-        } else {
-            f64::NAN
         };
-        if rank_ratio > config.rank3_warning_ratio {
-            warnings.push(format!(
-                "σ4/σ3 = {rank_ratio:.3} > {}: the tracks are far from rank 3 (strong \
-                 perspective, non-rigid or independently moving objects, or outlier tracks)",
-                config.rank3_warning_ratio
-            ));
-        }
-        if sv.len() >= 3 && sv[1] > 0.0 && sv[2] / sv[1] < config.rank2_warning_ratio {
-            warnings.push(format!(
-                "σ3/σ2 = {:.4} < {}: the tracks are close to rank 2 (planar scene or \
-                 degenerate motion such as rotation about the viewing axis only); depth is \
-                 poorly determined",
-                sv[2] / sv[1],
-                config.rank2_warning_ratio
-            ));
-        }
         let affine_prediction = Mat::from_fn(affine.m_hat.nrows(), affine.s_hat.ncols(), |r, p| {
             let mut v = affine.t[r];
             for k in 0..affine.m_hat.ncols() {
@@ -521,40 +735,7 @@ impl Reconstruction {
             }
             v
         });
-
-        let upgrade = timer.run("metric-upgrade", |_| {
-            metric::upgrade(affine.m_hat.as_ref(), config.camera, &config.metric)
-        })?;
-        if upgrade.method == metric::UpgradeMethod::Sdp {
-            warnings.push(format!(
-                "least-squares L is not positive definite (smallest eigenvalue {:.3e}); solved \
-                 the PSD-constrained SDP instead",
-                upgrade.min_eigenvalue_ls
-            ));
-        }
-        let mut model = initial_model(&meas, &affine, &upgrade, config.camera)?;
-
-        let refinement = match &config.refine {
-            Some(rc) => {
-                let r: RefineResult = timer.run("refine", |obs| {
-                    refine::refine(&meas, &mut model, config.camera, rc, obs)
-                })?;
-                if r.report.status == SolverStatus::Stalled {
-                    warnings.push("metric refinement stalled before converging".into());
-                }
-                Some(RefinementReport {
-                    rms_before_px: r.rms_before,
-                    rms_after_px: r.rms_after,
-                    status: r.report.status,
-                    iterations: r.report.iterations,
-                    seconds: r.report.seconds,
-                })
-            }
-            None => None,
-        };
-        refine::fix_gauge(&mut model, config.camera);
-        let mirrored = metric::apply_necker_convention(&mut model);
-        let rms_px = model.rms(&meas);
+        let metric_rms_px = model.rms(&meas);
 
         // Outlier tracks: affine and metric points from their own observations in the used
         // frames, given the fitted cameras (for display and completed.txt; not in the fit).
@@ -576,6 +757,18 @@ impl Reconstruction {
             points: vec![Vector3::repeat(f64::NAN); outlier_kept.len()],
         };
         outlier_model.triangulate(&outlier_meas);
+        let projective = projective.map(|pf| {
+            ProjectiveResult::new(
+                pf,
+                &fit,
+                &meas,
+                &outlier_meas,
+                &outlier_kept,
+                &kept,
+                &kept_tracks,
+                &used_tracks,
+            )
+        });
 
         for w in &warnings {
             timer.observer.on_event(&Event::Warning { message: w });
@@ -631,7 +824,8 @@ impl Reconstruction {
             camera_model: config.camera,
             frames,
             points: points.into_iter().map(|(_, p)| p).collect(),
-            rms_px,
+            rms_px: projective.as_ref().map_or(metric_rms_px, |p| p.rms_px),
+            metric_rms_px,
             metric_upgrade: upgrade,
             rank_ratio,
             singular_values: affine.singular_values,
@@ -639,6 +833,7 @@ impl Reconstruction {
             completion: completion_report,
             robust: robust_report,
             refinement,
+            projective,
             input: InputSummary {
                 frames: table.n_frames(),
                 tracks: table.n_tracks(),
@@ -664,12 +859,28 @@ impl Reconstruction {
         })
     }
 
-    /// The affine prediction laid out like the input table (2F×N in the input's frame and
-    /// track order); rows/columns of set-aside frames/tracks are NaN. Outlier tracks are
-    /// predicted from their own observations given the fitted affine cameras.
+    /// The fit's prediction laid out like the input table (2F×N in the input's frame and
+    /// track order); rows/columns of set-aside frames/tracks are NaN. With the projective
+    /// camera it is `π(P_f X_p)`, otherwise the affine prediction `M̂Ŝ + t1ᵀ`. Outlier
+    /// tracks are predicted from their own observations given the fitted cameras.
     pub fn completed_matrix(&self) -> Mat<f64> {
         let (f, n) = (self.input_frame_ids.len(), self.input_track_ids.len());
         let mut out = Mat::from_fn(2 * f, n, |_, _| f64::NAN);
+        if let Some(pr) = &self.projective {
+            for (kf, &fi) in self.kept_frames.iter().enumerate() {
+                for (kp, &pi) in self.kept_tracks.iter().enumerate() {
+                    let q = pr.model.project(kf, kp);
+                    out[(2 * fi, pi)] = q[0];
+                    out[(2 * fi + 1, pi)] = q[1];
+                }
+                for (k, &pi) in self.outlier_tracks.iter().enumerate() {
+                    let q = projective::project(&pr.model.cameras[kf], &pr.outlier_points[k]);
+                    out[(2 * fi, pi)] = q[0];
+                    out[(2 * fi + 1, pi)] = q[1];
+                }
+            }
+            return out;
+        }
         for (kf, &fi) in self.kept_frames.iter().enumerate() {
             for (kp, &pi) in self.kept_tracks.iter().enumerate() {
                 out[(2 * fi, pi)] = self.affine_prediction[(2 * kf, kp)];
@@ -687,6 +898,251 @@ impl Reconstruction {
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
     }
+}
+
+/// What [`fit_selection`] produced: the fit table and every model fitted to it.
+struct Fitted {
+    fit: TrackTable,
+    meas: Measurements,
+    /// Tracks and frames the selection starved (set aside after hiding entries).
+    set_aside: Vec<SetAside>,
+    /// Indices into the kept table of the fit's frames; indices into `inlier_idx` of its
+    /// tracks.
+    fit_frames: Vec<usize>,
+    fit_tracks: Vec<usize>,
+    /// Kept-table indices of the inlier tracks.
+    inlier_idx: Vec<usize>,
+    /// Indices into the input table of the fit's frames and tracks.
+    used_frames: Vec<usize>,
+    used_tracks: Vec<usize>,
+    /// Kept-table indices of the outlier tracks.
+    outlier_kept: Vec<usize>,
+    affine: Affine,
+    completion_report: Option<CompletionReport>,
+    upgrade: MetricUpgrade,
+    model: MetricModel,
+    refinement: Option<RefinementReport>,
+    mirrored: bool,
+    projective: Option<projective::ProjectiveFit>,
+    warnings: Vec<String>,
+}
+
+/// Fits the inlier tracks of `kept` with the flagged entries hidden: affine factorization
+/// (SVD or completion), metric upgrade, refinement, and with the projective camera the
+/// projective stages ([`crate::projective`]).
+#[allow(clippy::too_many_arguments)]
+fn fit_selection(
+    kept: &TrackTable,
+    kept_frames: &[usize],
+    kept_tracks: &[usize],
+    inlier: &[bool],
+    flagged: &[(usize, usize)],
+    config: &Config,
+    timer: &mut Timer<'_>,
+) -> Result<Fitted> {
+    let mut warnings = Vec::new();
+    let affine_camera = config.camera.affine();
+    // The table the fit uses: inlier tracks, flagged entries hidden, set aside again
+    // (hiding entries can starve a track or a frame).
+    let inlier_idx: Vec<usize> = (0..kept.n_tracks()).filter(|&p| inlier[p]).collect();
+    let all_frames: Vec<usize> = (0..kept.n_frames()).collect();
+    let mut fit_table = kept.select(&all_frames, &inlier_idx);
+    let mut pos = vec![usize::MAX; kept.n_tracks()];
+    for (k, &p) in inlier_idx.iter().enumerate() {
+        pos[p] = k;
+    }
+    for &(f, p) in flagged {
+        if pos[p] != usize::MAX {
+            fit_table.unset(f, pos[p]);
+        }
+    }
+    let min_points = min_points_per_frame(config, fit_table.is_complete());
+    let (fit, set_aside, fit_frames, fit_tracks) =
+        fit_table.set_aside(config.min_frames_per_track, min_points);
+    check_size(&fit)?;
+    let used_frames: Vec<usize> = fit_frames.iter().map(|&f| kept_frames[f]).collect();
+    let used_tracks: Vec<usize> = fit_tracks
+        .iter()
+        .map(|&k| kept_tracks[inlier_idx[k]])
+        .collect();
+    let outlier_kept: Vec<usize> = (0..kept.n_tracks()).filter(|&p| !inlier[p]).collect();
+    let meas = fit.measurements();
+    timer.observer.on_event(&Event::FitSelection {
+        frames: &used_frames,
+        tracks: &used_tracks,
+    });
+
+    let mut completion_report = None;
+    let affine = timer.run("factorize", |obs| -> Result<Affine> {
+        if meas.is_complete() {
+            factorize_complete(&meas, &config.svd)
+        } else {
+            let c = completion::complete(&meas, &config.completion, obs)?;
+            completion_report = Some(CompletionReport {
+                solver: c.solver,
+                model: c.model,
+                rms_px: c.rms,
+                status: c.report.status,
+                iterations: c.report.iterations,
+                runs: c.runs.len(),
+                seconds: c.report.seconds,
+            });
+            factorization_from_completion(&meas, c)
+        }
+    })?;
+    if let Some(c) = &completion_report
+        && c.status != SolverStatus::Converged
+    {
+        warnings.push(format!(
+            "missing-data completion ended with status {:?} after {} iterations",
+            c.status, c.iterations
+        ));
+    }
+    let sv = &affine.singular_values;
+    let rank_ratio = if sv.len() >= 4 && sv[2] > 0.0 {
+        sv[3] / sv[2]
+    } else {
+        f64::NAN
+    };
+    if rank_ratio > config.rank3_warning_ratio && config.camera.is_affine() {
+        warnings.push(format!(
+            "σ4/σ3 = {rank_ratio:.3} > {}: the tracks are far from rank 3 (strong \
+             perspective, non-rigid or independently moving objects, or outlier tracks)",
+            config.rank3_warning_ratio
+        ));
+    }
+    if sv.len() >= 3 && sv[1] > 0.0 && sv[2] / sv[1] < config.rank2_warning_ratio {
+        warnings.push(format!(
+            "σ3/σ2 = {:.4} < {}: the tracks are close to rank 2 (planar scene or \
+             degenerate motion such as rotation about the viewing axis only); depth is \
+             poorly determined",
+            sv[2] / sv[1],
+            config.rank2_warning_ratio
+        ));
+    }
+
+    let upgrade = timer.run("metric-upgrade", |_| {
+        metric::upgrade(affine.m_hat.as_ref(), affine_camera, &config.metric)
+    })?;
+    if upgrade.method == metric::UpgradeMethod::Sdp {
+        warnings.push(format!(
+            "least-squares L is not positive definite (smallest eigenvalue {:.3e}); solved \
+             the PSD-constrained SDP instead",
+            upgrade.min_eigenvalue_ls
+        ));
+    }
+    let mut model = initial_model(&meas, &affine, &upgrade, affine_camera)?;
+    let refinement = match &config.refine {
+        Some(rc) => {
+            let r: RefineResult = timer.run("refine", |obs| {
+                refine::refine(&meas, &mut model, affine_camera, rc, obs)
+            })?;
+            if r.report.status == SolverStatus::Stalled {
+                warnings.push("metric refinement stalled before converging".into());
+            }
+            Some(RefinementReport {
+                rms_before_px: r.rms_before,
+                rms_after_px: r.rms_after,
+                status: r.report.status,
+                iterations: r.report.iterations,
+                seconds: r.report.seconds,
+            })
+        }
+        None => None,
+    };
+    refine::fix_gauge(&mut model, affine_camera);
+    let mirrored = metric::apply_necker_convention(&mut model);
+
+    let projective = if config.camera == CameraModel::Projective {
+        let start = projective::AffineStart {
+            m: affine.m_hat.as_ref(),
+            s: affine.s_hat.as_ref(),
+            t: &affine.t,
+        };
+        let pf = timer.run("projective", |obs| {
+            projective::fit(&meas, start, &config.projective, 0, obs)
+        })?;
+        for st in &pf.stages {
+            if st.status != SolverStatus::Converged && st.stage != "sturm-triggs" {
+                warnings.push(format!(
+                    "projective stage {} ended with status {:?} after {} iterations",
+                    st.stage, st.status, st.iterations
+                ));
+            }
+        }
+        Some(pf)
+    } else {
+        None
+    };
+    Ok(Fitted {
+        fit,
+        meas,
+        set_aside,
+        fit_frames,
+        fit_tracks,
+        inlier_idx,
+        used_frames,
+        used_tracks,
+        outlier_kept,
+        affine,
+        completion_report,
+        upgrade,
+        model,
+        refinement,
+        mirrored,
+        projective,
+        warnings,
+    })
+}
+
+/// Refits the projective verdict may ask for (each a full fit of the new selection).
+const PROJECTIVE_VERDICT_ROUNDS: usize = 3;
+
+/// The projective verdict ([`projective::verdict::judge`]) on every kept track, over the
+/// fit's frames: (inlier per kept track, flagged entries in kept indices, σ_e, τ_e).
+fn projective_verdict(
+    kept: &TrackTable,
+    fitted: &Fitted,
+    pf: &projective::ProjectiveFit,
+    flagged: &[(usize, usize)],
+    rc: &RobustConfig,
+) -> (Vec<bool>, Vec<(usize, usize)>, f64, f64) {
+    let all: Vec<usize> = (0..kept.n_tracks()).collect();
+    let meas_sub = kept.select(&fitted.fit_frames, &all).measurements();
+    let mut frame_pos = vec![usize::MAX; kept.n_frames()];
+    for (k, &f) in fitted.fit_frames.iter().enumerate() {
+        frame_pos[f] = k;
+    }
+    let mut in_fit = vec![false; kept.n_tracks()];
+    for &k in &fitted.fit_tracks {
+        in_fit[fitted.inlier_idx[k]] = true;
+    }
+    let sub_flags: Vec<(usize, usize)> = flagged
+        .iter()
+        .filter(|&&(f, _)| frame_pos[f] != usize::MAX)
+        .map(|&(f, p)| (frame_pos[f], p))
+        .collect();
+    let v = projective::verdict::judge(&meas_sub, &pf.model, &in_fit, &sub_flags, rc);
+    let flags = v
+        .flagged
+        .iter()
+        .map(|&(f, p)| (fitted.fit_frames[f], p))
+        .collect();
+    (v.inlier, flags, v.noise_sigma_px, v.entry_threshold_px)
+}
+
+/// Fewest tracks a frame must see: `min_points_per_frame`, at least 4 with missing data
+/// (an affine camera estimated jointly with its translation has 4 unknowns per row), at
+/// least 6 for the projective camera (11 degrees of freedom, 2 equations per track).
+fn min_points_per_frame(config: &Config, complete: bool) -> usize {
+    let mut m = config.min_points_per_frame;
+    if !complete {
+        m = m.max(4);
+    }
+    if config.camera == CameraModel::Projective {
+        m = m.max(6);
+    }
+    m
 }
 
 fn check_size(t: &TrackTable) -> Result<()> {
@@ -814,6 +1270,16 @@ fn residual2(model: &MetricModel, meas: &Measurements, f: usize, p: usize) -> f6
 }
 
 fn validate_config(c: &Config) -> Result<()> {
+    if c.camera == CameraModel::Perspective {
+        return Err(Error::InvalidConfig {
+            field: "camera",
+            message: "the Euclidean perspective reconstruction (self-calibration) is not built \
+                      yet; use the projective camera, which returns P_f and X_p up to a 4×4 \
+                      homography"
+                .into(),
+        });
+    }
+    c.projective.validate()?;
     if c.min_frames_per_track < 2 {
         return Err(Error::InvalidConfig {
             field: "min_frames_per_track",
@@ -849,7 +1315,8 @@ fn factorize_complete(meas: &Measurements, cfg: &TruncatedSvdConfig) -> Result<A
         .collect();
     let centered = Mat::from_fn(rows, n, |r, p| meas.w[(r, p)] - t[r]);
     let svd = svd::truncated_svd(centered.as_ref(), 4, cfg)?;
-    if svd.s.len() < 3 || !(svd.s[2] > 0.0) {
+    // Rank < 3 up to rounding: σ3 at the level of σ1's rounding errors.
+    if svd.s.len() < 3 || !(svd.s[2] > 1e-10 * svd.s[0]) {
         return Err(Error::Degenerate(format!(
             "the centered observation matrix has rank < 3 (singular values {:?}): the points \
              or the motion do not span 3D",

@@ -14,7 +14,7 @@
 //! # Timelines
 //!
 //! * `stage` (sequence): [`STAGES`] gives the index of each stage — 0 input, 1 set-aside,
-//!   2 robust, 3 factorize, 4 metric-upgrade, 5 refine, 6 result. Stages the table does not
+//!   2 robust, 3 factorize, 4 metric-upgrade, 5 refine, 6 projective, 7 result. Stages the table does not
 //!   know get indices after it, in order of appearance.
 //! * `frame` (sequence): the frame's index in the *input* table (not its id).
 //! * `iteration` (sequence): solver iteration.
@@ -29,6 +29,9 @@
 //! | `image/trajectories` | LineStrips2D | one strip per input track; from stage `robust` on coloured green (inlier) / red (outlier) |
 //! | `image/set_aside/{points,trajectories}` | Points2D / LineStrips2D | set-aside tracks, red |
 //! | `image/residuals` | Arrows2D per frame | observed → predicted (metric model) |
+//! | `image/projective/residuals` | Arrows2D per frame | observed → `π(P_f X_p)` (projective camera) |
+//! | `projective/stages` | TextDocument | each projective stage's RMS before/after, status, iterations |
+//! | `projective/frame_rms` | Scalars per frame | per-frame RMS of the projective model |
 //! | `image/robust/{outliers,flagged}` | LineStrips2D / Points2D | robust pass: outlier tracks (labelled), flagged entries |
 //! | `factorization/visibility` | Image (L8) | F×N mask, white = observed |
 //! | `factorization/W` | Tensor (f32) | the kept 2F'×N' measurement matrix |
@@ -97,13 +100,14 @@ use crate::tracks::SetAsideKind;
 use crate::{Config, Error, Event, MetricModel, Observer, Reconstruction, TrackTable};
 
 /// Stage names in `stage`-timeline order (their index is the timeline value).
-pub const STAGES: [&str; 7] = [
+pub const STAGES: [&str; 8] = [
     "input",
     "set-aside",
     "robust",
     "factorize",
     "metric-upgrade",
     "refine",
+    "projective",
     "result",
 ];
 
@@ -125,6 +129,12 @@ pub mod paths {
     pub const SET_ASIDE_POINTS: &str = "image/set_aside/points";
     pub const SET_ASIDE_TRAJECTORIES: &str = "image/set_aside/trajectories";
     pub const RESIDUAL_ARROWS: &str = "image/residuals";
+    /// Observed → projective prediction `π(P_f X_p)` (camera `projective`).
+    pub const PROJECTIVE_RESIDUALS: &str = "image/projective/residuals";
+    /// The projective stages' RMS before/after, per stage (markdown table).
+    pub const PROJECTIVE_STAGES: &str = "projective/stages";
+    /// Per-frame RMS of the projective model, pixels.
+    pub const PROJECTIVE_FRAME_RMS: &str = "projective/frame_rms";
     pub const ROBUST_OUTLIERS: &str = "image/robust/outliers";
     pub const ROBUST_FLAGGED: &str = "image/robust/flagged";
     pub const ROBUST_INLIER_COUNT: &str = "solver/ransac/inliers";
@@ -1075,6 +1085,7 @@ fn log_result(
     }
     log_factorization(rec, result)?;
     log_metric(rec, result)?;
+    log_projective(rec, table, result, options)?;
     at_stage(rec, "result");
     rec.log(
         paths::SUMMARY,
@@ -1422,6 +1433,43 @@ fn log_residuals(
         paths::POINT_RMS,
         &BarChart::new(kept_points(r).map(|p| p.rms_px).collect::<Vec<f64>>()),
     )?;
+    send_residual_arrows(
+        rec,
+        table,
+        r,
+        options,
+        paths::RESIDUAL_ARROWS,
+        "refine",
+        |kf, kp| {
+            let q = r.model.project(kf, kp);
+            [q[0], q[1]]
+        },
+    )?;
+    let rms = Scalars::update_fields()
+        .with_scalars(r.frames.iter().map(|f| f.rms_px))
+        .columns_of_unit_batches()?;
+    send_per_frame(
+        rec,
+        paths::FRAME_RMS,
+        "refine",
+        &r.kept_frames,
+        rms.collect(),
+    )
+}
+
+/// Residual arrows (observed → `predict(kept frame, kept track)`) of the kept tracks on
+/// `path` per frame at `stage`, sent in blocks of frames
+/// ([`RecordingOptions::residual_arrows_per_chunk`]).
+#[allow(clippy::too_many_arguments)]
+fn send_residual_arrows(
+    rec: &RecordingStream,
+    table: &TrackTable,
+    r: &Reconstruction,
+    options: &RecordingOptions,
+    path: &str,
+    stage: &str,
+    predict: impl Fn(usize, usize) -> [f64; 2],
+) -> RecordingResult {
     let tracks = subsample(r.kept_tracks.len(), options.max_residual_arrows_per_frame);
     let inputs: Vec<usize> = tracks.iter().map(|&kp| r.kept_tracks[kp]).collect();
     // Sent in blocks of frames (RecordingOptions::residual_arrows_per_chunk), so that the
@@ -1439,7 +1487,7 @@ fn log_residuals(
             let (x, y, vis) = table.frame_row(fi);
             for (&kp, &pi) in tracks.iter().zip(&inputs) {
                 if vis[pi] {
-                    let q = r.model.project(kf, kp);
+                    let q = predict(kf, kp);
                     origins.push(x[pi] as f32);
                     origins.push(y[pi] as f32);
                     vectors.push((q[0] - x[pi]) as f32);
@@ -1458,24 +1506,65 @@ fn log_residuals(
                 .partitioned(lengths.iter().copied())?,
         ];
         let frame_values: Vec<usize> = part.iter().map(|&(_, fi)| fi).collect();
-        send_per_frame(
-            rec,
-            paths::RESIDUAL_ARROWS,
-            "refine",
-            &frame_values,
-            columns,
-        )?;
+        send_per_frame(rec, path, stage, &frame_values, columns)?;
     }
+    Ok(())
+}
+
+/// The projective stages (camera `projective`): residual arrows to `π(P_f X_p)`, per-frame
+/// RMS, and a table of each stage's RMS before/after at stage `projective`. Nothing for
+/// the affine cameras.
+fn log_projective(
+    rec: &RecordingStream,
+    table: &TrackTable,
+    r: &Reconstruction,
+    options: &RecordingOptions,
+) -> RecordingResult {
+    let Some(p) = &r.projective else {
+        return Ok(());
+    };
+    send_residual_arrows(
+        rec,
+        table,
+        r,
+        options,
+        paths::PROJECTIVE_RESIDUALS,
+        "projective",
+        |kf, kp| p.model.project(kf, kp),
+    )?;
     let rms = Scalars::update_fields()
-        .with_scalars(r.frames.iter().map(|f| f.rms_px))
+        .with_scalars(p.cameras.iter().map(|c| c.rms_px))
         .columns_of_unit_batches()?;
     send_per_frame(
         rec,
-        paths::FRAME_RMS,
-        "refine",
+        paths::PROJECTIVE_FRAME_RMS,
+        "projective",
         &r.kept_frames,
         rms.collect(),
-    )
+    )?;
+    at_stage(rec, "projective");
+    rec.log(
+        paths::PROJECTIVE_STAGES,
+        &TextDocument::from_markdown(projective_markdown(p)),
+    )?;
+    Ok(())
+}
+
+/// Markdown table of the projective stages.
+fn projective_markdown(p: &crate::reconstruction::ProjectiveResult) -> String {
+    let mut s = format!(
+        "# Projective reconstruction\n\nstart: {:?}; final RMS {:.6} px; reduced camera system \
+         {} non-zeros\n\n| stage | status | iterations | RMS before (px) | RMS after (px) | s |\n\
+         |---|---|---|---|---|---|\n",
+        p.start, p.rms_px, p.schur_nnz
+    );
+    for st in &p.stages {
+        s.push_str(&format!(
+            "| {} | {:?} | {} | {:.6} | {:.6} | {:.3} |\n",
+            st.stage, st.status, st.iterations, st.rms_before_px, st.rms_after_px, st.seconds
+        ));
+    }
+    s
 }
 
 /// The markdown run summary logged on `summary`: inputs, choices, results, timings,
@@ -1536,6 +1625,19 @@ pub fn summary_markdown(r: &Reconstruction) -> String {
         r.factorization.rms_px,
         r.rms_px
     ));
+    if let Some(p) = &r.projective {
+        s.push_str(&format!(
+            "* camera model: projective (start {:?}); metric (scaled-orthographic) model RMS \
+             {:.6} px\n",
+            p.start, r.metric_rms_px
+        ));
+        for st in &p.stages {
+            s.push_str(&format!(
+                "* projective {}: RMS {:.6} → {:.6} px ({:?}, {} iterations)\n",
+                st.stage, st.rms_before_px, st.rms_after_px, st.status, st.iterations
+            ));
+        }
+    }
     s.push_str("\n## Timings\n\n| stage | seconds |\n|---|---|\n");
     for t in &r.timings {
         s.push_str(&format!("| {} | {:.4} |\n", t.stage, t.seconds));

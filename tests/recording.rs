@@ -1179,3 +1179,67 @@ fn cli_track_records_frames_counts_and_tracks() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The projective camera's stages are recorded: the pOSE and bundle-adjustment iterations,
+/// residual arrows to `π(P_f X_p)` for every kept entry, per-frame RMS and the stage table.
+#[test]
+fn reconstruct_recorded_projective_stages() {
+    let scene = generate(&SynthConfig {
+        camera: rank3::CameraModel::Perspective,
+        frames: 10,
+        points: 40,
+        noise: 0.3,
+        missing: 0.3,
+        distance: 2.5,
+        seed: 3,
+        ..Default::default()
+    })
+    .unwrap();
+    let table = &scene.table;
+    let (dir, path, rec) = temp_recording("projective");
+    let config = Config {
+        camera: rank3::CameraModel::Projective,
+        robust: None,
+        ..Config::default()
+    };
+    let result = recording::reconstruct_recorded(Some(&rec), table, &config).unwrap();
+    drop(rec);
+    let p = result.projective.as_ref().expect("projective result");
+    let c = read_rrd(&path);
+    let kept_entries: usize = result
+        .kept_frames
+        .iter()
+        .map(|&f| {
+            result
+                .kept_tracks
+                .iter()
+                .filter(|&&t| table.is_visible(f, t))
+                .count()
+        })
+        .sum();
+    assert_eq!(
+        c.get(paths::PROJECTIVE_RESIDUALS, "Arrows2D:vectors")
+            .total(),
+        kept_entries
+    );
+    assert_eq!(
+        c.get(paths::PROJECTIVE_FRAME_RMS, "Scalars:scalars")
+            .total(),
+        result.kept_frames.len()
+    );
+    assert_eq!(
+        c.get(paths::PROJECTIVE_STAGES, "TextDocument:text").rows(),
+        1
+    );
+    for st in &p.stages {
+        // One cost scalar per accepted step plus the start.
+        let cost = c.get(&format!("solver/{}/run0/cost", st.stage), "Scalars:scalars");
+        assert!(
+            cost.total() >= 2,
+            "{}: {} cost rows",
+            st.stage,
+            cost.total()
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

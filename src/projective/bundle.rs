@@ -326,7 +326,8 @@ pub struct LmResult {
     pub schur_nnz: usize,
 }
 
-/// Cost `Σ ‖r‖²` of the current parameters.
+/// Cost `Σ ‖r‖²` of the current parameters (per-track sums in parallel, added in track
+/// order so that the result does not depend on the thread schedule).
 pub fn cost<M: BundleModel>(model: &M, g: &Graph, cams: &[f64], pts: &[f64]) -> f64 {
     let (cl, pl, m) = (model.cam_len(), model.pt_len(), model.res_dim());
     (0..g.n_pts)
@@ -342,6 +343,8 @@ pub fn cost<M: BundleModel>(model: &M, g: &Graph, cams: &[f64], pts: &[f64]) -> 
             }
             s
         })
+        .collect::<Vec<_>>()
+        .iter()
         .sum()
 }
 
@@ -359,7 +362,8 @@ pub fn track_cost<M: BundleModel>(model: &M, g: &Graph, cams: &[f64], x: &[f64],
 }
 
 /// Optimises every point for fixed cameras (`iterations` damped Gauss–Newton steps each,
-/// in parallel over tracks). Returns the new total cost. `O(n_obs)` per iteration.
+/// in parallel over tracks). Returns the new total cost (added in track order).
+/// `O(n_obs)` per iteration.
 pub fn solve_points<M: BundleModel>(
     model: &M,
     g: &Graph,
@@ -371,6 +375,8 @@ pub fn solve_points<M: BundleModel>(
     pts.par_chunks_mut(pl)
         .enumerate()
         .map(|(p, x)| solve_point(model, g, cams, x, p, iterations))
+        .collect::<Vec<_>>()
+        .iter()
         .sum()
 }
 

@@ -63,6 +63,7 @@
 pub mod bundle;
 pub mod models;
 mod sturm_triggs;
+pub mod verdict;
 
 use std::time::Instant;
 
@@ -91,6 +92,8 @@ pub enum Start {
     Affine,
     /// Iterated Sturm–Triggs depths (complete data).
     SturmTriggs,
+    /// A model given to [`refine`].
+    Given,
 }
 
 /// Settings of the projective stages. Every field has a documented default.
@@ -237,8 +240,9 @@ impl ProjectiveModel {
     }
 }
 
+/// `π(P X)` for a row-major 3×4 `P`: `(P₁X / P₃X, P₂X / P₃X)`.
 #[inline]
-fn project(c: &[f64; 12], x: &[f64; 4]) -> [f64; 2] {
+pub fn project(c: &[f64; 12], x: &[f64; 4]) -> [f64; 2] {
     let d = c[8] * x[0] + c[9] * x[1] + c[10] * x[2] + c[11] * x[3];
     [
         (c[0] * x[0] + c[1] * x[1] + c[2] * x[2] + c[3] * x[3]) / d,
@@ -486,7 +490,7 @@ pub fn fit(
     let mut stages = Vec::new();
 
     // Start: cameras (12 per frame) and points (4 per track), normalized coordinates.
-    let (mut cams, mut pts, start) = if cfg.sturm_triggs && meas.is_complete() {
+    let (cams, pts, start) = if cfg.sturm_triggs && meas.is_complete() {
         let t0 = Instant::now();
         observer.on_event(&Event::StageStarted {
             stage: "sturm-triggs",
@@ -572,14 +576,83 @@ pub fn fit(
         (cams, pts, Start::Affine)
     };
 
+    bundle_adjust(&g, &norm, cams, pts, start, stages, cfg, run, observer)
+}
+
+/// Projective bundle adjustment of `meas` from a given projective model (pixel
+/// coordinates; `start.points` one per track of `meas`, `start.cameras` one per frame): the
+/// last stage of [`fit`] alone, e.g. to refine a model from elsewhere or from the truth.
+pub fn refine(
+    meas: &Measurements,
+    start: &ProjectiveModel,
+    cfg: &ProjectiveConfig,
+    run: usize,
+    observer: &mut dyn Observer,
+) -> Result<ProjectiveFit> {
+    cfg.validate()?;
+    check_observations(meas)?;
+    if start.cameras.len() != meas.n_frames() || start.points.len() != meas.n_points() {
+        return Err(Error::Dimension {
+            context: "projective refine: start model",
+            expected: format!("{} cameras, {} points", meas.n_frames(), meas.n_points()),
+            got: format!(
+                "{} cameras, {} points",
+                start.cameras.len(),
+                start.points.len()
+            ),
+        });
+    }
+    let norm = Normalization::of(meas);
+    let g = graph(meas, &norm);
+    let mut cams = Vec::with_capacity(12 * meas.n_frames());
+    for c in &start.cameras {
+        let mut n = norm.camera_to_normalized(c);
+        bundle::normalize(&mut n);
+        cams.extend(n);
+    }
+    let mut pts = Vec::with_capacity(4 * meas.n_points());
+    for x in &start.points {
+        let mut v = *x;
+        bundle::normalize(&mut v);
+        pts.extend_from_slice(&v);
+    }
+    bundle_adjust(
+        &g,
+        &norm,
+        cams,
+        pts,
+        Start::Given,
+        Vec::new(),
+        cfg,
+        run,
+        observer,
+    )
+}
+
+/// The projective bundle adjustment stage shared by [`fit`] and [`refine`]: cameras and
+/// points in normalized coordinates on their unit spheres.
+#[allow(clippy::too_many_arguments)]
+fn bundle_adjust(
+    g: &Graph,
+    norm: &Normalization,
+    mut cams: Vec<f64>,
+    mut pts: Vec<f64>,
+    start: Start,
+    mut stages: Vec<StageReport>,
+    cfg: &ProjectiveConfig,
+    run: usize,
+    observer: &mut dyn Observer,
+) -> Result<ProjectiveFit> {
+    let px = 1.0 / norm.scale;
+    let n_scalars = (2 * g.n_obs()).max(1) as f64;
     let t0 = Instant::now();
     observer.on_event(&Event::StageStarted {
         stage: "projective-ba",
     });
-    let before = (bundle::cost(&models::Projective, &g, &cams, &pts) / n_scalars).sqrt() * px;
+    let before = (bundle::cost(&models::Projective, g, &cams, &pts) / n_scalars).sqrt() * px;
     let r = bundle::minimize(
         &models::Projective,
-        &g,
+        g,
         &mut cams,
         &mut pts,
         &cfg.refine,
@@ -608,7 +681,7 @@ pub fn fit(
         rms_after_px: rms_px,
         seconds,
     });
-    let model = to_pixels(&cams, &pts, &g, &norm);
+    let model = to_pixels(&cams, &pts, g, norm);
     Ok(ProjectiveFit {
         model,
         rms_px,

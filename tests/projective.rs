@@ -1,0 +1,225 @@
+//! The projective camera end to end: synthetic perspective scenes with truth, the real
+//! benchmark optima, the robust pass judged by the projective model, and input errors.
+
+use rank3::completion::Init;
+use rank3::projective::Start;
+use rank3::synth::{OutlierKind, Shape, SynthConfig, SynthScene, generate};
+use rank3::{CameraModel, Config, Error, Reconstruction, TrackTable};
+
+fn scene(distance: f64, missing: f64, noise: f64, seed: u64) -> SynthScene {
+    generate(&SynthConfig {
+        camera: CameraModel::Perspective,
+        shape: Shape::House,
+        frames: 14,
+        points: 60,
+        noise,
+        missing,
+        distance,
+        seed,
+        ..SynthConfig::default()
+    })
+    .unwrap()
+}
+
+fn projective_config() -> Config {
+    Config {
+        camera: CameraModel::Projective,
+        robust: None,
+        ..Config::default()
+    }
+}
+
+/// Largest distance, over every frame and track (observed or not), between the
+/// reconstruction's prediction `π(P_f X_p)` and the true noise-free projection.
+fn max_prediction_error(rec: &Reconstruction, s: &SynthScene) -> f64 {
+    prediction_errors(rec, s).into_iter().fold(0.0, f64::max)
+}
+
+/// Distance between prediction and truth of every (frame, track) entry.
+fn prediction_errors(rec: &Reconstruction, s: &SynthScene) -> Vec<f64> {
+    let truth = s.perspective.as_ref().unwrap();
+    let pred = rec.completed_matrix();
+    let mut out = Vec::new();
+    for f in 0..s.table.n_frames() {
+        for p in 0..s.table.n_tracks() {
+            let q = truth.project(f, &s.truth.points[p]);
+            out.push(
+                ((pred[(2 * f, p)] - q[0]).powi(2) + (pred[(2 * f + 1, p)] - q[1]).powi(2)).sqrt(),
+            );
+        }
+    }
+    out
+}
+
+#[test]
+fn noise_free_complete_scene_is_fitted_exactly() {
+    let s = scene(2.5, 0.0, 0.0, 1);
+    let rec = Reconstruction::from_tracks(&s.table, &projective_config()).unwrap();
+    let p = rec.projective.as_ref().unwrap();
+    assert_eq!(p.start, Start::SturmTriggs);
+    assert!(rec.rms_px < 1e-9, "RMS {}", rec.rms_px);
+    // The affine model cannot fit strong perspective.
+    assert!(rec.metric_rms_px > 1.0, "metric RMS {}", rec.metric_rms_px);
+    assert!(max_prediction_error(&rec, &s) < 1e-7);
+}
+
+#[test]
+fn noise_free_scenes_with_missing_data_are_fitted_exactly() {
+    for (distance, missing, seed) in [(2.5, 0.3, 2), (2.5, 0.5, 3), (30.0, 0.5, 4)] {
+        let s = scene(distance, missing, 0.0, seed);
+        assert!(!s.table.is_complete());
+        let rec = Reconstruction::from_tracks(&s.table, &projective_config()).unwrap();
+        let p = rec.projective.as_ref().unwrap();
+        assert_eq!(p.start, Start::Affine);
+        assert!(
+            rec.rms_px < 1e-9,
+            "distance {distance}, missing {missing}: RMS {}",
+            rec.rms_px
+        );
+        // Hidden entries are predicted too: the reprojections are projective invariants.
+        let e = max_prediction_error(&rec, &s);
+        assert!(
+            e < 1e-6,
+            "distance {distance}, missing {missing}: prediction off by {e} px"
+        );
+    }
+}
+
+#[test]
+fn noisy_scene_fits_at_the_noise_level() {
+    let s = scene(2.5, 0.4, 1.0, 5);
+    let rec = Reconstruction::from_tracks(&s.table, &projective_config()).unwrap();
+    // RMS over observed scalars of 1 px noise, less the fitted degrees of freedom.
+    assert!(rec.rms_px > 0.6 && rec.rms_px < 1.0, "RMS {}", rec.rms_px);
+    // The prediction of every entry, hidden ones included, against the noise-free truth:
+    // its median is below the noise (the fit averages it out), while tracks seen in few
+    // frames extrapolate worse.
+    let mut e = prediction_errors(&rec, &s);
+    e.sort_by(|a, b| a.total_cmp(b));
+    let median = e[e.len() / 2];
+    eprintln!(
+        "prediction vs truth: median {median:.3} px, max {:.3} px",
+        e[e.len() - 1]
+    );
+    assert!(median < 1.0, "median prediction error {median} px");
+}
+
+#[test]
+fn random_starts_are_reproducible_with_the_seed() {
+    let s = scene(3.0, 0.4, 0.5, 6);
+    let mut cfg = projective_config();
+    cfg.completion.init = Init::Random;
+    cfg.completion.runs = 2;
+    cfg.completion.seed = 11;
+    let a = Reconstruction::from_tracks(&s.table, &cfg).unwrap();
+    let b = Reconstruction::from_tracks(&s.table, &cfg).unwrap();
+    let (pa, pb) = (a.projective.unwrap(), b.projective.unwrap());
+    assert_eq!(pa.model, pb.model);
+    assert_eq!(a.rms_px, b.rms_px);
+}
+
+#[test]
+fn the_robust_pass_judges_tracks_by_the_projective_model() {
+    let s = generate(&SynthConfig {
+        camera: CameraModel::Perspective,
+        frames: 20,
+        points: 120,
+        noise: 0.5,
+        missing: 0.3,
+        distance: 2.5,
+        outliers: 0.1,
+        outlier_kind: OutlierKind::RandomWalk,
+        seed: 7,
+        ..SynthConfig::default()
+    })
+    .unwrap();
+    let cfg = Config {
+        camera: CameraModel::Projective,
+        ..Config::default()
+    };
+    let rec = Reconstruction::from_tracks(&s.table, &cfg).unwrap();
+    let robust = rec.robust.as_ref().unwrap();
+    assert!(robust.projective.is_some());
+    let rejected: Vec<bool> = rec.points.iter().map(|p| !p.inlier).collect();
+    let truly_out: Vec<bool> = s.outlier_tracks.iter().map(|o| o.is_some()).collect();
+    let good_rejected = (0..rejected.len())
+        .filter(|&p| rejected[p] && !truly_out[p])
+        .count();
+    let bad_kept = (0..rejected.len())
+        .filter(|&p| !rejected[p] && truly_out[p])
+        .count();
+    // Strong perspective (the affine pass alone splits these tracks): every good track is
+    // kept and every random walk rejected.
+    assert_eq!(good_rejected, 0, "good tracks rejected");
+    assert_eq!(bad_kept, 0, "outlier tracks kept");
+    assert!(rec.rms_px < 0.6, "RMS {}", rec.rms_px);
+}
+
+#[test]
+fn too_small_or_degenerate_input_is_a_typed_error() {
+    // Five tracks: a projective reconstruction needs 7.
+    let s = scene(3.0, 0.0, 0.0, 8);
+    let few = s.table.select(
+        &(0..s.table.n_frames()).collect::<Vec<_>>(),
+        &[0, 1, 2, 3, 4],
+    );
+    match Reconstruction::from_tracks(&few, &projective_config()) {
+        Err(Error::TooFew { .. }) => {}
+        other => panic!("expected TooFew, got {other:?}"),
+    }
+    // A static camera: every frame the same image.
+    let mut t = TrackTable::new(
+        (0..6).map(rank3::Id::Int).collect(),
+        (0..20).map(rank3::Id::Int).collect(),
+    );
+    for f in 0..6 {
+        for p in 0..20 {
+            t.set(
+                f,
+                p,
+                100.0 + 17.0 * (p as f64).sin() * 10.0,
+                200.0 + 13.0 * (p as f64).cos() * 10.0,
+            );
+        }
+    }
+    match Reconstruction::from_tracks(&t, &projective_config()) {
+        Err(Error::Degenerate(_)) => {}
+        other => panic!("expected Degenerate, got {other:?}"),
+    }
+}
+
+#[test]
+fn the_euclidean_perspective_model_is_refused_with_a_clear_error() {
+    let s = scene(3.0, 0.0, 0.0, 9);
+    let cfg = Config {
+        camera: CameraModel::Perspective,
+        ..Config::default()
+    };
+    match Reconstruction::from_tracks(&s.table, &cfg) {
+        Err(Error::InvalidConfig {
+            field: "camera", ..
+        }) => {}
+        other => panic!("expected InvalidConfig(camera), got {other:?}"),
+    }
+}
+
+/// The best known projective optima (ECCV 2016, Table 7) from the default pipeline.
+#[test]
+fn real_benchmarks_reach_the_known_projective_optima() {
+    for (rel, best) in [
+        ("model_house/matrix/M_dense.txt", 0.441660),
+        ("dino_trimmed/M_dense.txt", 1.114493),
+    ] {
+        let Some(path) = rank3::datasets::find(rel) else {
+            eprintln!("SKIPPED: {rel} not found");
+            continue;
+        };
+        let table = TrackTable::read(&path).unwrap();
+        let rec = Reconstruction::from_tracks(&table, &projective_config()).unwrap();
+        assert!(
+            ((rec.rms_px - best) / best).abs() < 1e-6,
+            "{rel}: RMS {} vs best known {best}",
+            rec.rms_px
+        );
+    }
+}
