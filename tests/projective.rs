@@ -223,3 +223,114 @@ fn real_benchmarks_reach_the_known_projective_optima() {
         );
     }
 }
+
+/// A short video-like sparse table: a camera moving along a corridor of points at depth
+/// 3–7, each track observed while the point is in view (no noise).
+fn corridor(
+    frames: usize,
+    points: usize,
+    seed: u64,
+) -> (Vec<rank3::projective::Observation>, usize) {
+    use nalgebra::{Matrix3, Rotation3, Vector3};
+    use rand::{RngExt, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let k = Matrix3::new(500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0);
+    let mut obs = Vec::new();
+    let mut n_tracks = 0;
+    for _ in 0..points {
+        let p = Vector3::new(
+            rng.random_range(-3.0..0.25 * frames as f64 + 3.0),
+            rng.random_range(-1.5..1.5),
+            rng.random_range(3.0..7.0),
+        );
+        let mut seen = Vec::new();
+        for f in 0..frames {
+            let a = f as f64;
+            let r =
+                Rotation3::from_euler_angles(0.05 * (a / 7.0).sin(), 0.08 * (a / 11.0).sin(), 0.0);
+            let x = r * (p - Vector3::new(0.25 * a, 0.2 * (a / 9.0).sin(), 0.0));
+            let q = k * x;
+            let (u, v) = (q[0] / q[2], q[1] / q[2]);
+            if x[2] > 0.5 && (0.0..640.0).contains(&u) && (0.0..480.0).contains(&v) {
+                seen.push((f, [u, v]));
+            }
+        }
+        if seen.len() >= 2 {
+            for (frame, xy) in seen {
+                obs.push(rank3::projective::Observation {
+                    frame,
+                    track: n_tracks,
+                    xy,
+                });
+            }
+            n_tracks += 1;
+        }
+    }
+    (obs, n_tracks)
+}
+
+#[test]
+fn a_sparse_sequence_is_fitted_exactly_through_windows() {
+    use rank3::projective::windowed::WindowConfig;
+    use rank3::projective::{ProjectiveConfig, fit_observations};
+    let (obs, n_tracks) = corridor(30, 240, 3);
+    let windows = WindowConfig {
+        window: 14,
+        overlap: 6,
+        ..WindowConfig::default()
+    };
+    for projective in [true, false] {
+        let w = WindowConfig {
+            projective,
+            ..windows.clone()
+        };
+        let fit = fit_observations(
+            &obs,
+            30,
+            n_tracks,
+            &ProjectiveConfig::default(),
+            &w,
+            &mut rank3::NoopObserver,
+        )
+        .unwrap();
+        assert_eq!(fit.start, Start::Windows);
+        assert!(
+            fit.rms_px < 1e-9,
+            "projective windows {projective}: RMS {}",
+            fit.rms_px
+        );
+        let worst = obs
+            .iter()
+            .map(|o| {
+                let q = fit.model.project(o.frame, o.track);
+                (q[0] - o.xy[0]).hypot(q[1] - o.xy[1])
+            })
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-8, "worst reprojection {worst}");
+    }
+    // Bad input: a repeated pair and an index out of range are typed errors.
+    let mut dup = obs.clone();
+    dup.push(obs[0]);
+    assert!(matches!(
+        fit_observations(
+            &dup,
+            30,
+            n_tracks,
+            &ProjectiveConfig::default(),
+            &windows,
+            &mut rank3::NoopObserver
+        ),
+        Err(Error::Degenerate(_))
+    ));
+    assert!(matches!(
+        fit_observations(
+            &obs,
+            10,
+            n_tracks,
+            &ProjectiveConfig::default(),
+            &windows,
+            &mut rank3::NoopObserver
+        ),
+        Err(Error::InvalidConfig { .. })
+    ));
+}

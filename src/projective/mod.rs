@@ -64,6 +64,7 @@ pub mod bundle;
 pub mod models;
 mod sturm_triggs;
 pub mod verdict;
+pub mod windowed;
 
 use std::time::Instant;
 
@@ -94,6 +95,8 @@ pub enum Start {
     SturmTriggs,
     /// A model given to [`refine`].
     Given,
+    /// Overlapping windows of frames, chained ([`windowed`]).
+    Windows,
 }
 
 /// Settings of the projective stages. Every field has a documented default.
@@ -521,62 +524,297 @@ pub fn fit(
         (c, x, Start::SturmTriggs)
     } else {
         let (c, x) = affine_start(&affine, &norm);
-        let (c, x) = match cfg.bridge {
-            Bridge::Direct => (c, x),
-            Bridge::Pose { eta } => {
-                let model = models::Pose { eta };
-                let (mut c, mut x) = (c, x);
-                let t0 = Instant::now();
-                observer.on_event(&Event::StageStarted { stage: "pose" });
-                let before = (bundle::cost(&model, &g, &c, &x) / n_scalars).sqrt() * px;
-                let r = bundle::minimize(
-                    &model,
-                    &g,
-                    &mut c,
-                    &mut x,
-                    &cfg.pose,
-                    &mut Progress {
-                        observer: &mut *observer,
-                        name: "pose",
-                        run,
-                        rms_scale: px * std::f64::consts::SQRT_2,
-                    },
-                )
-                .map_err(|message| Error::Numerical {
-                    stage: "pOSE",
-                    message,
-                })?;
-                let seconds = t0.elapsed().as_secs_f64();
-                observer.on_event(&Event::StageFinished {
-                    stage: "pose",
-                    seconds,
-                });
-                stages.push(StageReport {
-                    stage: "pose".into(),
-                    status: r.report.status,
-                    iterations: r.report.iterations,
-                    rms_before_px: before,
-                    rms_after_px: (r.report.final_cost / n_scalars).sqrt() * px,
-                    seconds,
-                });
-                (c, x)
-            }
-        };
-        // Projective parameters: unit-norm cameras and homogeneous points.
-        let mut cams = c;
-        for v in cams.chunks_mut(12) {
-            bundle::normalize(v);
-        }
-        let mut pts = Vec::with_capacity(4 * np);
-        for p in 0..np {
-            let mut v = [x[3 * p], x[3 * p + 1], x[3 * p + 2], 1.0];
-            bundle::normalize(&mut v);
-            pts.extend_from_slice(&v);
-        }
+        let (cams, pts) = bridge(&g, px, c, x, cfg, run, observer, &mut stages)?;
         (cams, pts, Start::Affine)
     };
 
     bundle_adjust(&g, &norm, cams, pts, start, stages, cfg, run, observer)
+}
+
+/// From affine cameras (12 per frame, normalized coordinates) and points (3 per track) to
+/// the projective parameterisation, through the pOSE stage when [`Bridge::Pose`].
+#[allow(clippy::too_many_arguments)]
+fn bridge(
+    g: &Graph,
+    px: f64,
+    c: Vec<f64>,
+    x: Vec<f64>,
+    cfg: &ProjectiveConfig,
+    run: usize,
+    observer: &mut dyn Observer,
+    stages: &mut Vec<StageReport>,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let n_scalars = (2 * g.n_obs()).max(1) as f64;
+    let (c, x) = match cfg.bridge {
+        Bridge::Direct => (c, x),
+        Bridge::Pose { eta } => {
+            let model = models::Pose { eta };
+            let (mut c, mut x) = (c, x);
+            let t0 = Instant::now();
+            observer.on_event(&Event::StageStarted { stage: "pose" });
+            let before = (bundle::cost(&model, g, &c, &x) / n_scalars).sqrt() * px;
+            let r = bundle::minimize(
+                &model,
+                g,
+                &mut c,
+                &mut x,
+                &cfg.pose,
+                &mut Progress {
+                    observer: &mut *observer,
+                    name: "pose",
+                    run,
+                    rms_scale: px * std::f64::consts::SQRT_2,
+                },
+            )
+            .map_err(|message| Error::Numerical {
+                stage: "pOSE",
+                message,
+            })?;
+            let seconds = t0.elapsed().as_secs_f64();
+            observer.on_event(&Event::StageFinished {
+                stage: "pose",
+                seconds,
+            });
+            stages.push(StageReport {
+                stage: "pose".into(),
+                status: r.report.status,
+                iterations: r.report.iterations,
+                rms_before_px: before,
+                rms_after_px: (r.report.final_cost / n_scalars).sqrt() * px,
+                seconds,
+            });
+            (c, x)
+        }
+    };
+    // Projective parameters: unit-norm cameras and homogeneous points.
+    let mut cams = c;
+    for v in cams.chunks_mut(12) {
+        bundle::normalize(v);
+    }
+    let mut pts = Vec::with_capacity(4 * g.n_pts);
+    for p in 0..g.n_pts {
+        let mut v = [x[3 * p], x[3 * p + 1], x[3 * p + 2], 1.0];
+        bundle::normalize(&mut v);
+        pts.extend_from_slice(&v);
+    }
+    Ok((cams, pts))
+}
+
+/// One observation of a sparse track table: frame and track indices, pixel position.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Observation {
+    pub frame: usize,
+    pub track: usize,
+    pub xy: [f64; 2],
+}
+
+/// Projective reconstruction of a sparse table of observations (`n_frames` frames,
+/// `n_tracks` tracks), for long sequences: nothing is `O(F·N)`. The affine start comes
+/// from overlapping windows of frames ([`windowed::affine_start`]), then the pOSE bridge and
+/// the projective bundle adjustment as in [`fit`]. Time and memory are linear in the
+/// observations for a fixed window and bounded track length (the reduced camera system of a
+/// video is banded).
+///
+/// Errors: [`Error::InvalidConfig`] for indices out of range or a bad configuration,
+/// [`Error::Degenerate`] for a repeated (frame, track) pair, a non-finite position or a
+/// window that cannot be factorized or chained, [`Error::TooFew`] as in
+/// [`check_observations`].
+pub fn fit_observations(
+    obs: &[Observation],
+    n_frames: usize,
+    n_tracks: usize,
+    cfg: &ProjectiveConfig,
+    windows: &windowed::WindowConfig,
+    observer: &mut dyn Observer,
+) -> Result<ProjectiveFit> {
+    cfg.validate()?;
+    let mut order: Vec<usize> = (0..obs.len()).collect();
+    for o in obs {
+        if o.frame >= n_frames || o.track >= n_tracks {
+            return Err(Error::InvalidConfig {
+                field: "observations",
+                message: format!(
+                    "observation of track {} in frame {} is outside the {n_frames}×{n_tracks} table",
+                    o.track, o.frame
+                ),
+            });
+        }
+        if !(o.xy[0].is_finite() && o.xy[1].is_finite()) {
+            return Err(Error::Degenerate(format!(
+                "observed value of track {} in frame {} is not finite",
+                o.track, o.frame
+            )));
+        }
+    }
+    order.sort_unstable_by_key(|&i| (obs[i].track, obs[i].frame));
+    if let Some(w) = order
+        .windows(2)
+        .find(|w| (obs[w[0]].track, obs[w[0]].frame) == (obs[w[1]].track, obs[w[1]].frame))
+    {
+        let o = obs[w[0]];
+        return Err(Error::Degenerate(format!(
+            "track {} is observed twice in frame {}",
+            o.track, o.frame
+        )));
+    }
+    // Normalization from the observations.
+    let n = obs.len().max(1) as f64;
+    let cx = obs.iter().map(|o| o.xy[0]).sum::<f64>() / n;
+    let cy = obs.iter().map(|o| o.xy[1]).sum::<f64>() / n;
+    let d = obs
+        .iter()
+        .map(|o| ((o.xy[0] - cx).powi(2) + (o.xy[1] - cy).powi(2)).sqrt())
+        .sum::<f64>()
+        / n;
+    let norm = Normalization {
+        centre: [cx, cy],
+        scale: if d > 0.0 && d.is_finite() {
+            std::f64::consts::SQRT_2 / d
+        } else {
+            1.0
+        },
+    };
+    let mut pt_ptr = vec![0usize; n_tracks + 1];
+    for o in obs {
+        pt_ptr[o.track + 1] += 1;
+    }
+    for p in 0..n_tracks {
+        pt_ptr[p + 1] += pt_ptr[p];
+    }
+    let g = Graph {
+        n_cams: n_frames,
+        n_pts: n_tracks,
+        pt_ptr,
+        cam: order.iter().map(|&i| obs[i].frame).collect(),
+        w: order
+            .iter()
+            .map(|&i| {
+                let o = obs[i];
+                [
+                    norm.scale * (o.xy[0] - norm.centre[0]),
+                    norm.scale * (o.xy[1] - norm.centre[1]),
+                ]
+            })
+            .collect(),
+    };
+    check_graph(&g)?;
+    let px = 1.0 / norm.scale;
+    let t0 = Instant::now();
+    observer.on_event(&Event::StageStarted { stage: "windows" });
+    let start = if windows.projective {
+        windowed::projective_start(&g, windows, cfg)?
+    } else {
+        let (mut c, mut x) = windowed::affine_start(&g, windows)?;
+        condition(&mut c, &mut x);
+        (c, x)
+    };
+    let seconds = t0.elapsed().as_secs_f64();
+    observer.on_event(&Event::StageFinished {
+        stage: "windows",
+        seconds,
+    });
+    let mut stages = vec![StageReport {
+        stage: "windows".into(),
+        status: SolverStatus::Converged,
+        iterations: n_frames.div_ceil((windows.window - windows.overlap).max(1)),
+        rms_before_px: f64::NAN,
+        rms_after_px: f64::NAN,
+        seconds,
+    }];
+    let (cams, pts) = if windows.projective {
+        start
+    } else {
+        bridge(&g, px, start.0, start.1, cfg, 0, observer, &mut stages)?
+    };
+    bundle_adjust(
+        &g,
+        &norm,
+        cams,
+        pts,
+        Start::Windows,
+        stages,
+        cfg,
+        0,
+        observer,
+    )
+}
+
+/// [`check_observations`] on a graph.
+fn check_graph(g: &Graph) -> Result<()> {
+    if g.n_cams < 2 {
+        return Err(Error::TooFew {
+            what: "frames for a projective reconstruction",
+            needed: 2,
+            have: g.n_cams,
+        });
+    }
+    if g.n_pts < 7 {
+        return Err(Error::TooFew {
+            what: "tracks for a projective reconstruction",
+            needed: 7,
+            have: g.n_pts,
+        });
+    }
+    let mut per_frame = vec![0usize; g.n_cams];
+    for &c in &g.cam {
+        per_frame[c] += 1;
+    }
+    if let Some(&have) = per_frame.iter().min()
+        && have < 6
+    {
+        return Err(Error::TooFew {
+            what: "tracks seen in a frame (a projective camera has 11 degrees of freedom)",
+            needed: 6,
+            have,
+        });
+    }
+    if let Some(have) = (0..g.n_pts).map(|p| g.track(p).len()).min()
+        && have < 2
+    {
+        return Err(Error::TooFew {
+            what: "frames observing a track",
+            needed: 2,
+            have,
+        });
+    }
+    Ok(())
+}
+
+/// Centres and scales affine points to unit RMS (3 per track) and folds the map into the
+/// cameras (12 per frame): the conditioning of [`affine_start`]. Untouched if degenerate.
+fn condition(cams: &mut [f64], pts: &mut [f64]) {
+    let np = pts.len() / 3;
+    if np == 0 {
+        return;
+    }
+    let mu: [f64; 3] =
+        std::array::from_fn(|k| (0..np).map(|p| pts[3 * p + k]).sum::<f64>() / np as f64);
+    let sigma = ((0..np)
+        .map(|p| {
+            (0..3)
+                .map(|k| (pts[3 * p + k] - mu[k]).powi(2))
+                .sum::<f64>()
+        })
+        .sum::<f64>()
+        / np as f64)
+        .sqrt();
+    if !(sigma > 0.0 && sigma.is_finite()) {
+        return;
+    }
+    for c in cams.chunks_mut(12) {
+        for r in 0..3 {
+            let shift: f64 = (0..3).map(|k| c[4 * r + k] * mu[k]).sum();
+            c[4 * r + 3] += shift;
+            for k in 0..3 {
+                c[4 * r + k] *= sigma;
+            }
+        }
+    }
+    for p in 0..np {
+        for k in 0..3 {
+            pts[3 * p + k] = (pts[3 * p + k] - mu[k]) / sigma;
+        }
+    }
 }
 
 /// Projective bundle adjustment of `meas` from a given projective model (pixel
@@ -693,43 +931,27 @@ fn bundle_adjust(
 }
 
 /// `P_f = T [M_f t_f; 0 0 0 1] H`, `X_p = H⁻¹ (s_p, 1)` with `H` centring and scaling the
-/// affine points to unit RMS (conditioning), in normalized image coordinates. Returns
+/// affine points to unit RMS ([`condition`]), in normalized image coordinates. Returns
 /// (cameras 12 per frame, points 3 per track: the pOSE parameterisation).
 fn affine_start(a: &AffineStart<'_>, norm: &Normalization) -> (Vec<f64>, Vec<f64>) {
     let (nf, np) = (a.m.nrows() / 2, a.s.ncols());
-    let mu: [f64; 3] =
-        std::array::from_fn(|k| (0..np).map(|p| a.s[(k, p)]).sum::<f64>() / np.max(1) as f64);
-    let spread = ((0..np)
-        .map(|p| (0..3).map(|k| (a.s[(k, p)] - mu[k]).powi(2)).sum::<f64>())
-        .sum::<f64>()
-        / np.max(1) as f64)
-        .sqrt();
-    let sigma = if spread > 0.0 && spread.is_finite() {
-        spread
-    } else {
-        1.0
-    };
     let mut cams = Vec::with_capacity(12 * nf);
     for f in 0..nf {
         let mut c = [0.0; 12];
         for r in 0..2 {
-            let row = 2 * f + r;
-            let mut shift = a.t[row];
             for k in 0..3 {
-                c[4 * r + k] = a.m[(row, k)] * sigma;
-                shift += a.m[(row, k)] * mu[k];
+                c[4 * r + k] = a.m[(2 * f + r, k)];
             }
-            c[4 * r + 3] = shift;
+            c[4 * r + 3] = a.t[2 * f + r];
         }
         c[11] = 1.0;
         cams.extend(norm.camera_to_normalized(&c));
     }
-    let mut pts = Vec::with_capacity(3 * np);
-    for p in 0..np {
-        for k in 0..3 {
-            pts.push((a.s[(k, p)] - mu[k]) / sigma);
-        }
-    }
+    let mut pts: Vec<f64> = (0..np)
+        .flat_map(|p| (0..3).map(move |k| (p, k)))
+        .map(|(p, k)| a.s[(k, p)])
+        .collect();
+    condition(&mut cams, &mut pts);
     (cams, pts)
 }
 

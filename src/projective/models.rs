@@ -71,6 +71,44 @@ impl BundleModel for Projective {
     fn normalize_pt(&self, pt: &mut [f64]) {
         normalize(pt)
     }
+
+    /// The 15-dimensional projective gauge `P_f → P_f (I + E)`: every direction of camera
+    /// 0 (its orbit `P_0 E` spans all of its tangent space), and for camera 1 the
+    /// transformations that leave camera 0 fixed, `E = c₀ vᵀ` with `c₀` camera 0's centre
+    /// (`P_0 c₀ = 0`): the directions `(P_1 c₀) e_kᵀ`, `k = 1..4`.
+    fn gauge_pins(&self, cams: &[f64], n_cams: usize) -> Vec<(usize, Vec<[f64; 12]>)> {
+        if n_cams < 2 {
+            return Vec::new();
+        }
+        let all: Vec<[f64; 12]> = (0..12)
+            .map(|i| std::array::from_fn(|j| if i == j { 1.0 } else { 0.0 }))
+            .collect();
+        let c0 = centre(&cams[..12]);
+        let p1 = &cams[12..24];
+        let e: [f64; 3] = std::array::from_fn(|r| (0..4).map(|k| p1[4 * r + k] * c0[k]).sum());
+        let dirs = (0..4)
+            .map(|k| {
+                let mut v = [0.0; 12];
+                for r in 0..3 {
+                    v[4 * r + k] = e[r];
+                }
+                v
+            })
+            .collect();
+        vec![(0, all), (1, dirs)]
+    }
+}
+
+/// The centre of a camera `P` (3×4 row-major): the null vector, by the generalised cross
+/// product of its rows (signed 3×3 minors).
+fn centre(p: &[f64]) -> [f64; 4] {
+    let m = |a: usize, b: usize, c: usize| {
+        let col = |k: usize| [p[k], p[4 + k], p[8 + k]];
+        let (x, y, z) = (col(a), col(b), col(c));
+        x[0] * (y[1] * z[2] - y[2] * z[1]) - x[1] * (y[0] * z[2] - y[2] * z[0])
+            + x[2] * (y[0] * z[1] - y[1] * z[0])
+    };
+    [m(1, 2, 3), -m(0, 2, 3), m(0, 1, 3), -m(0, 1, 2)]
 }
 
 /// The pseudo object space error (pOSE) of Hong & Zach (CVPR 2018): for `X = (x̃, 1)`,
@@ -195,6 +233,19 @@ mod tests {
         ];
         check(&Projective, &cam, &[0.3, -0.2, 0.5, 1.0], [0.2, -0.1]);
         check(&Pose { eta: 0.1 }, &cam, &[0.3, -0.2, 0.5], [0.2, -0.1]);
+    }
+
+    #[test]
+    fn centre_is_the_null_vector() {
+        let p = [
+            0.9, 0.1, -0.2, 0.3, 0.05, 1.1, 0.2, -0.4, 0.01, -0.02, 0.1, 2.0,
+        ];
+        let c = centre(&p);
+        for r in 0..3 {
+            let v: f64 = (0..4).map(|k| p[4 * r + k] * c[k]).sum();
+            assert!(v.abs() < 1e-14, "row {r}: {v}");
+        }
+        assert!(c.iter().map(|x| x * x).sum::<f64>() > 1e-6);
     }
 
     #[test]

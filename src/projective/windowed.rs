@@ -1,0 +1,341 @@
+//! An affine start for long sequences in time linear in the observations: affine
+//! factorizations of overlapping windows of frames, chained by the affine maps between
+//! their shared tracks.
+//!
+//! The dense affine completion ([`crate::completion`]) factorises a `(2F·4)²` camera system
+//! and a dense `F×N` start: fine for hundreds of frames, impossible for a 20 000-frame video.
+//! A video's tracks are short, so frames far apart share nothing and a window of frames is
+//! a small, well-connected problem:
+//!
+//! 1. Frames `[s, s + window)` for `s = 0, stride, 2·stride, …` (`stride = window −
+//!    overlap`; the last window ends at the last frame). Each window keeps the tracks it
+//!    sees in ≥ 2 of its frames and is completed by the damped Wiberg / VarPro solver
+//!    ([`crate::completion::complete`], data-driven start): `W_k ≈ M_k S_k + t_k 1ᵀ`.
+//! 2. Window 0 fixes the global affine frame. Window `k` is mapped into it by the affine
+//!    map `X ↦ A X + b` that best carries its points onto the already placed points of the
+//!    same tracks (linear least squares over the shared tracks, ≥ 4 needed); its cameras
+//!    become `M A⁻¹`, `t − M A⁻¹ b`. A frame's camera comes from the first window that
+//!    contains it, a track's point from the first window that places it.
+//! 3. Tracks no window placed (seen in < 2 frames of every window) are left at the origin:
+//!    the variable-projection stage that follows solves every point for its cameras first.
+//!
+//! Cost: `Σ_k` (one window's completion) — with a fixed window, linear in the frames and
+//! the observations; memory of one window at a time plus `O(F + N)` for the result.
+
+use faer::Mat;
+use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
+
+use super::bundle::Graph;
+use crate::completion::{self, CompletionConfig};
+use crate::{Error, Measurements, NoopObserver, Result};
+
+/// Settings of [`affine_start`]. Every field has a documented default.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WindowConfig {
+    /// Frames per window. Default 40.
+    pub window: usize,
+    /// Frames shared by consecutive windows. Default 20.
+    pub overlap: usize,
+    /// The per-window completion. Default [`CompletionConfig::default`] (affine model,
+    /// damped Wiberg, data-driven start).
+    pub completion: CompletionConfig,
+    /// Fit each window projectively and chain the windows by homographies
+    /// ([`projective_start`]) rather than chaining affine windows ([`affine_start`]).
+    /// Default true (measured: docs/results.md).
+    pub projective: bool,
+}
+
+impl Default for WindowConfig {
+    fn default() -> Self {
+        Self {
+            window: 40,
+            overlap: 20,
+            completion: CompletionConfig::default(),
+            projective: true,
+        }
+    }
+}
+
+/// Affine cameras (12 per frame: `[M_f t_f; 0 0 0 1]` row-major) and points (3 per track)
+/// for the observations of `g`, in `g`'s coordinates.
+///
+/// Errors: [`Error::InvalidConfig`] for `overlap ≥ window` or `window < 2`;
+/// [`Error::Disconnected`]-like gaps as [`Error::Degenerate`] naming the window (fewer than
+/// 4 tracks shared with the frames before it), and the completion's input errors for a
+/// window (e.g. a frame seeing fewer than 4 of the window's tracks).
+pub fn affine_start(g: &Graph, cfg: &WindowConfig) -> Result<(Vec<f64>, Vec<f64>)> {
+    let nf = g.n_cams;
+    let np = g.n_pts;
+    let mut cams = vec![f64::NAN; 12 * nf];
+    let mut cam_done = vec![false; nf];
+    let mut pts = vec![0.0; 3 * np];
+    let mut placed = vec![false; np];
+    let mut first = true;
+    for_each_window(g, cfg, |start, end, tracks, meas| {
+        let c = complete_window(start, end, tracks, meas, cfg)?;
+        // Map into the global frame: X_glob = A X + b.
+        let (a, b) = if first {
+            (Matrix3::identity(), Vector3::zeros())
+        } else {
+            let shared: Vec<usize> = (0..tracks.len()).filter(|&k| placed[tracks[k]]).collect();
+            if shared.len() < 4 {
+                return Err(too_few_shared(start, end, shared.len(), 4));
+            }
+            // Per output coordinate r: minimise Σ (A_r·x + b_r − y_r)² over the shared tracks.
+            let mut ata = Matrix4::<f64>::zeros();
+            let mut aty = [Vector4::<f64>::zeros(); 3];
+            for &k in &shared {
+                let x = Vector4::new(c.s[(0, k)], c.s[(1, k)], c.s[(2, k)], 1.0);
+                ata += x * x.transpose();
+                let p = tracks[k];
+                for r in 0..3 {
+                    aty[r] += x * pts[3 * p + r];
+                }
+            }
+            let ch = ata.cholesky().ok_or_else(|| {
+                Error::Degenerate(format!(
+                    "frames {start}..{end}: the tracks shared with earlier frames are coplanar; \
+                     the windows cannot be chained"
+                ))
+            })?;
+            let mut a = Matrix3::zeros();
+            let mut b = Vector3::zeros();
+            for r in 0..3 {
+                let sol = ch.solve(&aty[r]);
+                for k in 0..3 {
+                    a[(r, k)] = sol[k];
+                }
+                b[r] = sol[3];
+            }
+            (a, b)
+        };
+        let ainv = a.try_inverse().ok_or_else(|| {
+            Error::Degenerate(format!(
+                "frames {start}..{end}: the affine map to the earlier frames is singular"
+            ))
+        })?;
+        for f in start..end {
+            if cam_done[f] {
+                continue;
+            }
+            let lf = f - start;
+            for r in 0..2 {
+                let m = Vector3::new(
+                    c.m[(2 * lf + r, 0)],
+                    c.m[(2 * lf + r, 1)],
+                    c.m[(2 * lf + r, 2)],
+                );
+                // M X + t = M A⁻¹ (X_glob − b) + t.
+                let mg = ainv.transpose() * m;
+                for k in 0..3 {
+                    cams[12 * f + 4 * r + k] = mg[k];
+                }
+                cams[12 * f + 4 * r + 3] = c.t[2 * lf + r] - mg.dot(&b);
+            }
+            cams[12 * f + 8..12 * f + 12].copy_from_slice(&[0.0, 0.0, 0.0, 1.0]);
+            cam_done[f] = true;
+        }
+        for (k, &p) in tracks.iter().enumerate() {
+            if placed[p] {
+                continue;
+            }
+            let x = a * Vector3::new(c.s[(0, k)], c.s[(1, k)], c.s[(2, k)]) + b;
+            pts[3 * p..3 * p + 3].copy_from_slice(&[x[0], x[1], x[2]]);
+            placed[p] = true;
+        }
+        first = false;
+        Ok(())
+    })?;
+    Ok((cams, pts))
+}
+
+/// Projective cameras (12 per frame) and points (4 per track; zero for tracks no window
+/// places) for the observations of `g`, in `g`'s coordinates: each window is fitted by
+/// the projective chain ([`super::fit`]: affine completion, `pcfg`'s bridge, projective
+/// bundle adjustment) and mapped into window 0's projective frame by the homography `G`
+/// with `X_glob ≃ G X` over the tracks it shares with the windows before it (linear: the
+/// smallest eigenvector of `Σ AᵀA` over the rows `X_glob,i (G X)_j − X_glob,j (G X)_i`,
+/// ≥ 6 tracks needed); its cameras become `P G⁻¹`. A chain of accurate local projective
+/// reconstructions drifts far less than one of affine ones, which leaves the global bundle
+/// adjustment only the accumulated inconsistencies to correct.
+///
+/// Cost: one window's projective fit per `stride` frames: linear in the frames.
+pub fn projective_start(
+    g: &Graph,
+    cfg: &WindowConfig,
+    pcfg: &super::ProjectiveConfig,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let nf = g.n_cams;
+    let np = g.n_pts;
+    let mut cams = vec![f64::NAN; 12 * nf];
+    let mut cam_done = vec![false; nf];
+    let mut pts = vec![0.0; 4 * np];
+    let mut placed = vec![false; np];
+    let mut first = true;
+    for_each_window(g, cfg, |start, end, tracks, meas| {
+        let c = complete_window(start, end, tracks, meas, cfg)?;
+        let fit = super::fit(
+            meas,
+            super::AffineStart {
+                m: c.m.as_ref(),
+                s: c.s.as_ref(),
+                t: &c.t,
+            },
+            pcfg,
+            0,
+            &mut NoopObserver,
+        )
+        .map_err(|e| {
+            Error::Degenerate(format!(
+                "window of frames {start}..{end} ({} tracks): projective fit failed: {e}",
+                tracks.len()
+            ))
+        })?;
+        let model = fit.model;
+        let gm = if first {
+            Matrix4::identity()
+        } else {
+            let shared: Vec<usize> = (0..tracks.len()).filter(|&k| placed[tracks[k]]).collect();
+            if shared.len() < 6 {
+                return Err(too_few_shared(start, end, shared.len(), 6));
+            }
+            let mut ata = nalgebra::SMatrix::<f64, 16, 16>::zeros();
+            for &k in &shared {
+                let x = model.points[k];
+                let y = &pts[4 * tracks[k]..4 * tracks[k] + 4];
+                for i in 0..4 {
+                    for j in i + 1..4 {
+                        // y_i (G x)_j − y_j (G x)_i = Σ_l (y_i x_l G_jl − y_j x_l G_il).
+                        let mut row = nalgebra::SVector::<f64, 16>::zeros();
+                        for l in 0..4 {
+                            row[4 * j + l] += y[i] * x[l];
+                            row[4 * i + l] -= y[j] * x[l];
+                        }
+                        ata += row * row.transpose();
+                    }
+                }
+            }
+            let e = nalgebra::SymmetricEigen::new(ata);
+            let v = e.eigenvectors.column(e.eigenvalues.imin());
+            Matrix4::from_fn(|r, c| v[4 * r + c])
+        };
+        let ginv = gm.try_inverse().ok_or_else(|| {
+            Error::Degenerate(format!(
+                "frames {start}..{end}: the homography to the earlier frames is singular"
+            ))
+        })?;
+        for f in start..end {
+            if cam_done[f] {
+                continue;
+            }
+            let p = model.cameras[f - start];
+            for r in 0..3 {
+                for col in 0..4 {
+                    cams[12 * f + 4 * r + col] =
+                        (0..4).map(|k| p[4 * r + k] * ginv[(k, col)]).sum();
+                }
+            }
+            super::bundle::normalize(&mut cams[12 * f..12 * f + 12]);
+            cam_done[f] = true;
+        }
+        for (k, &p) in tracks.iter().enumerate() {
+            if placed[p] {
+                continue;
+            }
+            let x = Vector4::from(model.points[k]);
+            let y = gm * x;
+            pts[4 * p..4 * p + 4].copy_from_slice(y.as_slice());
+            super::bundle::normalize(&mut pts[4 * p..4 * p + 4]);
+            placed[p] = true;
+        }
+        first = false;
+        Ok(())
+    })?;
+    Ok((cams, pts))
+}
+
+fn too_few_shared(start: usize, end: usize, have: usize, need: usize) -> Error {
+    Error::Degenerate(format!(
+        "frames {start}..{end} share {have} track(s) with the frames before them ({need} \
+         needed to chain the windows)"
+    ))
+}
+
+/// The window's affine completion, errors naming the window.
+fn complete_window(
+    start: usize,
+    end: usize,
+    tracks: &[usize],
+    meas: &Measurements,
+    cfg: &WindowConfig,
+) -> Result<completion::Completion> {
+    completion::complete(meas, &cfg.completion, &mut NoopObserver).map_err(|e| {
+        Error::Degenerate(format!(
+            "window of frames {start}..{end} ({} tracks) cannot be factorized: {e}",
+            tracks.len()
+        ))
+    })
+}
+
+/// Calls `each(start, end, tracks, meas)` for every window in order: frames
+/// `start..end`, the tracks seen in ≥ 2 of them (indices into `g`) and their dense
+/// measurements (window frames × those tracks).
+fn for_each_window(
+    g: &Graph,
+    cfg: &WindowConfig,
+    mut each: impl FnMut(usize, usize, &[usize], &Measurements) -> Result<()>,
+) -> Result<()> {
+    if cfg.window < 2 || cfg.overlap >= cfg.window {
+        return Err(Error::InvalidConfig {
+            field: "projective.windows",
+            message: format!(
+                "window {} and overlap {}: need window ≥ 2 and overlap < window",
+                cfg.window, cfg.overlap
+            ),
+        });
+    }
+    let (nf, np) = (g.n_cams, g.n_pts);
+    let (fptr, ftracks) = g.by_camera();
+    let obs_of = |f: usize, p: usize| -> Option<usize> {
+        let r = g.track(p);
+        let k = g.cam[r.clone()].binary_search(&f).ok()?;
+        Some(r.start + k)
+    };
+    let stride = cfg.window - cfg.overlap;
+    let mut local = vec![usize::MAX; np];
+    let mut start = 0;
+    loop {
+        let end = (start + cfg.window).min(nf);
+        let mut count: Vec<(usize, usize)> = Vec::new();
+        for f in start..end {
+            for &p in &ftracks[fptr[f]..fptr[f + 1]] {
+                if local[p] == usize::MAX {
+                    local[p] = count.len();
+                    count.push((p, 0));
+                }
+                count[local[p]].1 += 1;
+            }
+        }
+        let tracks: Vec<usize> = count.iter().filter(|c| c.1 >= 2).map(|c| c.0).collect();
+        for c in &count {
+            local[c.0] = usize::MAX;
+        }
+        let nw = end - start;
+        let mut w = Mat::<f64>::zeros(2 * nw, tracks.len());
+        let mut vis = vec![false; nw * tracks.len()];
+        for (k, &p) in tracks.iter().enumerate() {
+            for f in start..end {
+                if let Some(o) = obs_of(f, p) {
+                    w[(2 * (f - start), k)] = g.w[o][0];
+                    w[(2 * (f - start) + 1, k)] = g.w[o][1];
+                    vis[(f - start) * tracks.len() + k] = true;
+                }
+            }
+        }
+        each(start, end, &tracks, &Measurements::new(w, vis))?;
+        if end == nf {
+            return Ok(());
+        }
+        start += stride;
+    }
+}
