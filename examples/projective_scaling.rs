@@ -5,9 +5,11 @@
 //! pOSE, sparse projective bundle adjustment). Each size runs in its own process so that
 //! its peak resident memory (`VmHWM`) is its own.
 //!
-//! `cargo run --release --example projective_scaling -- [FRAMES ...]`
-//! (default 1000 2000 5000 10000 20000; `--points-per-frame K`, default 150, sets the
-//! density). The growth exponents are the log–log slopes of time and memory against the
+//! `cargo run --release --example projective_scaling -- [FRAMES ...] [--points-per-frame K]
+//! [--max-iterations N] [--affine-windows]`
+//! (default 1000 2000 5000 10000 20000; K, default 150, sets the density; N caps the bundle
+//! adjustment, to measure its cost per iteration; `--affine-windows` chains affine windows,
+//! cheaper than the default projective ones). The growth exponents are the log–log slopes of time and memory against the
 //! number of observations between the smallest and the largest size.
 
 use std::process::Command;
@@ -132,10 +134,16 @@ fn peak_rss_mb() -> f64 {
         .map_or(f64::NAN, |kb| kb / 1024.0)
 }
 
-/// The default configuration; `JOINT=1` uses the joint (damped points, no re-solve)
-/// bundle adjustment instead of variable projection, `DIRECT=1` skips pOSE (experiments).
-fn config() -> ProjectiveConfig {
+/// The configuration of a run: the defaults, with `--max-iterations N` capping the bundle
+/// adjustment (to measure the cost per iteration on long sequences) and `--affine-windows`
+/// chaining affine windows (`WindowConfig::projective = false`) instead of projective ones.
+/// `JOINT=1` in the environment uses the joint (damped points, no re-solve) bundle
+/// adjustment instead of variable projection, `DIRECT=1` skips pOSE (experiments).
+fn config(max_iterations: Option<usize>) -> ProjectiveConfig {
     let mut c = ProjectiveConfig::default();
+    if let Some(m) = max_iterations {
+        c.refine.max_iterations = m;
+    }
     if std::env::var_os("JOINT").is_some() {
         c.refine.damp_points = true;
         c.refine.resolve_points = false;
@@ -147,15 +155,18 @@ fn config() -> ProjectiveConfig {
 }
 
 /// One size, in this process: prints one tab-separated line.
-fn one(frames: usize, per_frame: usize) {
+fn one(frames: usize, per_frame: usize, max_iterations: Option<usize>, affine_windows: bool) {
     let (obs, n_tracks) = table(frames, per_frame, 1);
     let t0 = Instant::now();
     let r = fit_observations(
         &obs,
         frames,
         n_tracks,
-        &config(),
-        &WindowConfig::default(),
+        &config(max_iterations),
+        &WindowConfig {
+            projective: !affine_windows,
+            ..WindowConfig::default()
+        },
         &mut Printer,
     );
     let seconds = t0.elapsed().as_secs_f64();
@@ -166,8 +177,12 @@ fn one(frames: usize, per_frame: usize) {
                 .iter()
                 .map(|s| format!("{} {:.1} s / {} it", s.stage, s.seconds, s.iterations))
                 .collect();
+            let ba = fit
+                .stages
+                .last()
+                .map_or(f64::NAN, |s| s.seconds / s.iterations.max(1) as f64);
             println!(
-                "{frames}\t{n_tracks}\t{}\t{seconds:.2}\t{:.1}\t{:.4}\t{}\t{:?}\t{}",
+                "{frames}\t{n_tracks}\t{}\t{seconds:.2}\t{:.1}\t{:.4}\t{}\t{:?}\t{}\t{ba:.3}",
                 obs.len(),
                 peak_rss_mb(),
                 fit.rms_px,
@@ -185,6 +200,8 @@ fn main() {
     let mut per_frame = 150;
     let mut sizes = Vec::new();
     let mut child = false;
+    let mut max_iterations = None;
+    let mut affine_windows = false;
     let mut i = 0;
     while i < args.len() {
         match args[i].as_str() {
@@ -193,13 +210,18 @@ fn main() {
                 i += 1;
             }
             "--one" => child = true,
+            "--affine-windows" => affine_windows = true,
+            "--max-iterations" => {
+                max_iterations = args.get(i + 1).and_then(|a| a.parse().ok());
+                i += 1;
+            }
             a => sizes.extend(a.parse::<usize>().ok()),
         }
         i += 1;
     }
     if child {
         for &f in &sizes {
-            one(f, per_frame);
+            one(f, per_frame, max_iterations, affine_windows);
         }
         return;
     }
@@ -212,21 +234,26 @@ fn main() {
     );
     println!();
     println!(
-        "| frames | tracks | observations | seconds | peak MB | bytes/obs (peak) | RMS px | Schur nnz | status | stages |"
+        "| frames | tracks | observations | seconds | peak MB | bytes/obs (peak) | RMS px | Schur nnz | status | stages | BA s per solve |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     let exe = std::env::current_exe().expect("current executable");
     let mut rows = Vec::new();
     for f in sizes {
-        let out = Command::new(&exe)
-            .args([
-                "--one",
-                &f.to_string(),
-                "--points-per-frame",
-                &per_frame.to_string(),
-            ])
-            .output()
-            .expect("run a size");
+        let mut cmd = Command::new(&exe);
+        cmd.args([
+            "--one",
+            &f.to_string(),
+            "--points-per-frame",
+            &per_frame.to_string(),
+        ]);
+        if let Some(m) = max_iterations {
+            cmd.args(["--max-iterations", &m.to_string()]);
+        }
+        if affine_windows {
+            cmd.arg("--affine-windows");
+        }
+        let out = cmd.output().expect("run a size");
         let line = String::from_utf8_lossy(&out.stdout).trim().to_string();
         let c: Vec<&str> = line.split('\t').collect();
         if c.len() < 9 {
@@ -239,7 +266,7 @@ fn main() {
             c[4].parse().unwrap_or(f64::NAN),
         );
         println!(
-            "| {} | {} | {} | {:.2} | {:.0} | {:.0} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {:.2} | {:.0} | {:.0} | {} | {} | {} | {} | {} |",
             c[0],
             c[1],
             c[2],
@@ -249,7 +276,8 @@ fn main() {
             c[5],
             c[6],
             c[7],
-            c[8]
+            c[8],
+            c.get(9).unwrap_or(&"")
         );
         rows.push((nobs, secs, mb));
     }

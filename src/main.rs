@@ -499,7 +499,7 @@ struct RunArgs {
     out: PathBuf,
     #[command(flatten)]
     opts: TrackOpts,
-    /// Metric camera model.
+    /// Camera model: orthographic, scaled-orthographic or projective.
     #[arg(long, value_enum, default_value = "scaled-orthographic")]
     camera: CameraArg,
     /// Reconstruct from the tracks seen in every frame only (by default the partial

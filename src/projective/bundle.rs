@@ -57,8 +57,10 @@
 //! dimension `c` and point dimension `d`: linearisation `O(n_obs (c + d) m)`; forming `S`
 //! `O(Σ_p k_p² c² d)`; its factorisation depends on the fill of the camera graph —
 //! `O(F b² c³)` for a banded graph of half-bandwidth `b` (a video), `O((cF)³)` only when
-//! every frame shares tracks with every other. Memory: `O(n_obs c d)` for the `W` blocks
-//! plus the non-zeros of `S` and of its factor; nothing is `O(F·N)`.
+//! every frame shares tracks with every other. Memory: `O(n_obs (c d + m c))` for the `W`
+//! blocks and camera Jacobians (57 numbers per observation for the projective model) plus
+//! the non-zeros of `S` and of its factor; nothing is `O(F·N)`. Tracks are linearised in
+//! parallel, then the camera blocks in parallel over cameras.
 //!
 //! # References
 //!
@@ -603,7 +605,26 @@ pub fn minimize<M: BundleModel>(
     let mut iterations = 0;
     // Buffers reused across iterations: W blocks (cd × pd per observation), camera
     // blocks U (cd × cd), gradients.
-    let mut wblk = vec![0.0; nobs * cd * pd];
+    // Per observation: W = J_cᵀ J_x (cd × pd), J_c in the tangent space (m × cd), r (m).
+    let stride = cd * pd + m * cd + m;
+    let mut lin = vec![0.0; nobs * stride];
+    // Observations by camera (for the camera blocks, in parallel over cameras).
+    let (cam_ptr, cam_obs) = {
+        let mut ptr = vec![0usize; nf + 1];
+        for &c in &g.cam {
+            ptr[c + 1] += 1;
+        }
+        for f in 0..nf {
+            ptr[f + 1] += ptr[f];
+        }
+        let mut fill = ptr.clone();
+        let mut idx = vec![0usize; nobs];
+        for (o, &c) in g.cam.iter().enumerate() {
+            idx[fill[c]] = o;
+            fill[c] += 1;
+        }
+        (ptr, idx)
+    };
     let mut u = vec![0.0; nf * cd * cd];
     let mut gc = vec![0.0; nf * cd];
     let mut cam_basis = vec![0.0; nf * cl * cd];
@@ -622,24 +643,30 @@ pub fn minimize<M: BundleModel>(
                 &mut cam_basis[f * cl * cd..(f + 1) * cl * cd],
             );
         }
-        let lins: Vec<(TrackLin, Vec<f64>)> = (0..np)
+        // Per track (in parallel): V_p, g_p and each observation's W, J_c, r.
+        let mut pieces: Vec<&mut [f64]> = Vec::with_capacity(np);
+        {
+            let mut rest: &mut [f64] = &mut lin;
+            for p in 0..np {
+                let (head, tail) = rest.split_at_mut(g.track(p).len() * stride);
+                pieces.push(head);
+                rest = tail;
+            }
+        }
+        let lins: Vec<TrackLin> = pieces
             .into_par_iter()
-            .map(|p| {
+            .enumerate()
+            .map(|(p, out)| {
                 let x = &pts[p * pl..(p + 1) * pl];
                 let mut pb = vec![0.0; pl * pd];
                 let has_pb = model.pt_basis(x, &mut pb);
                 let mut r = vec![0.0; m];
                 let mut jc = vec![0.0; m * cl];
                 let mut jp = vec![0.0; m * pl];
-                let mut jct = vec![0.0; m * cd];
                 let mut jpt = vec![0.0; m * pd];
-                let range = g.track(p);
                 let mut v = vec![0.0; pd * pd];
                 let mut gp = vec![0.0; pd];
-                // Per observation: W (cd×pd), then U contribution (cd×cd) and g_c (cd).
-                let k = range.len();
-                let mut out = vec![0.0; k * (cd * pd + cd * cd + cd)];
-                for (i, o) in range.enumerate() {
+                for (i, o) in g.track(p).enumerate() {
                     let f = g.cam[o];
                     model.eval(
                         &cams[f * cl..(f + 1) * cl],
@@ -648,6 +675,9 @@ pub fn minimize<M: BundleModel>(
                         &mut r,
                         Some((&mut jc, &mut jp)),
                     );
+                    let blk = &mut out[i * stride..(i + 1) * stride];
+                    let (wb, rest) = blk.split_at_mut(cd * pd);
+                    let (jct, rb) = rest.split_at_mut(m * cd);
                     tangent(
                         &jc,
                         &cam_basis[f * cl * cd..(f + 1) * cl * cd],
@@ -655,24 +685,18 @@ pub fn minimize<M: BundleModel>(
                         m,
                         cl,
                         cd,
-                        &mut jct,
+                        jct,
                     );
                     tangent(&jp, &pb, has_pb, m, pl, pd, &mut jpt);
-                    let blk =
-                        &mut out[i * (cd * pd + cd * cd + cd)..(i + 1) * (cd * pd + cd * cd + cd)];
-                    let (wb, rest) = blk.split_at_mut(cd * pd);
-                    let (ub, gb) = rest.split_at_mut(cd * cd);
+                    rb.copy_from_slice(&r);
+                    wb.iter_mut().for_each(|w| *w = 0.0);
                     for row in 0..m {
                         let a = &jct[row * cd..(row + 1) * cd];
                         let b = &jpt[row * pd..(row + 1) * pd];
                         let e = r[row];
                         for c1 in 0..cd {
-                            gb[c1] += a[c1] * e;
                             for c2 in 0..pd {
                                 wb[c1 * pd + c2] += a[c1] * b[c2];
-                            }
-                            for c2 in 0..=c1 {
-                                ub[c1 * cd + c2] += a[c1] * a[c2];
                             }
                         }
                         for d1 in 0..pd {
@@ -688,31 +712,30 @@ pub fn minimize<M: BundleModel>(
                         v[d2 * pd + d1] = v[d1 * pd + d2];
                     }
                 }
-                (TrackLin { v, gp }, out)
+                TrackLin { v, gp }
             })
             .collect();
-        u.iter_mut().for_each(|x| *x = 0.0);
-        gc.iter_mut().for_each(|x| *x = 0.0);
-        let stride = cd * pd + cd * cd + cd;
-        for p in 0..np {
-            let out = &lins[p].1;
-            for (i, o) in g.track(p).enumerate() {
-                let f = g.cam[o];
-                let blk = &out[i * stride..(i + 1) * stride];
-                wblk[o * cd * pd..(o + 1) * cd * pd].copy_from_slice(&blk[..cd * pd]);
-                let ub = &blk[cd * pd..cd * pd + cd * cd];
-                let uf = &mut u[f * cd * cd..(f + 1) * cd * cd];
-                for c1 in 0..cd {
-                    for c2 in 0..=c1 {
-                        uf[c1 * cd + c2] += ub[c1 * cd + c2];
+        // Per camera (in parallel): U_f = Σ J_cᵀ J_c (lower triangle), g_f = Σ J_cᵀ r.
+        u.par_chunks_mut(cd * cd)
+            .zip(gc.par_chunks_mut(cd))
+            .enumerate()
+            .for_each(|(f, (uf, gf))| {
+                uf.iter_mut().for_each(|x| *x = 0.0);
+                gf.iter_mut().for_each(|x| *x = 0.0);
+                for &o in &cam_obs[cam_ptr[f]..cam_ptr[f + 1]] {
+                    let blk = &lin[o * stride + cd * pd..(o + 1) * stride];
+                    let (jct, rb) = blk.split_at(m * cd);
+                    for row in 0..m {
+                        let a = &jct[row * cd..(row + 1) * cd];
+                        for c1 in 0..cd {
+                            gf[c1] += a[c1] * rb[row];
+                            for c2 in 0..=c1 {
+                                uf[c1 * cd + c2] += a[c1] * a[c2];
+                            }
+                        }
                     }
                 }
-                for c1 in 0..cd {
-                    gc[f * cd + c1] += blk[cd * pd + cd * cd + c1];
-                }
-            }
-        }
-        let lins: Vec<TrackLin> = lins.into_iter().map(|(l, _)| l).collect();
+            });
         let mean_diag_u = (0..nf * cd)
             .map(|i| u[(i / cd) * cd * cd + (i % cd) * cd + i % cd])
             .sum::<f64>()
@@ -816,7 +839,7 @@ pub fn minimize<M: BundleModel>(
                 let vi = &vinv[p];
                 let gp = &lins[p].gp;
                 for (i, o) in range.clone().enumerate() {
-                    let wb = &wblk[o * cd * pd..(o + 1) * cd * pd];
+                    let wb = &lin[o * stride..o * stride + cd * pd];
                     for c1 in 0..cd {
                         for d2 in 0..pd {
                             let mut s = 0.0;
@@ -841,7 +864,7 @@ pub fn minimize<M: BundleModel>(
                         let fj = g.cam[oj];
                         // Frames increase along a track, so fi ≥ fj. Column c2 of
                         // block (fi, fj) is contiguous in the CSC values.
-                        let wj = &wblk[oj * cd * pd..(oj + 1) * cd * pd];
+                        let wj = &lin[oj * stride..oj * stride + cd * pd];
                         for c2 in 0..cd {
                             let (base, r0) = pattern.column(fi, fj, c2);
                             let w2 = &wj[c2 * pd..(c2 + 1) * pd];
@@ -884,7 +907,7 @@ pub fn minimize<M: BundleModel>(
                     let mut b = lins[p].gp.iter().map(|v| -v).collect::<Vec<_>>();
                     for o in g.track(p) {
                         let f = g.cam[o];
-                        let wb = &wblk[o * cd * pd..(o + 1) * cd * pd];
+                        let wb = &lin[o * stride..o * stride + cd * pd];
                         for c1 in 0..cd {
                             let dcv = dc[f * cd + c1];
                             for d in 0..pd {

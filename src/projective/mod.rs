@@ -403,51 +403,19 @@ fn dlt_point(g: &Graph, cams: &[f64], p: usize) -> [f64; 4] {
 /// every frame seeing ≥ 6 tracks (11 parameters, 2 equations per track), every track seen
 /// in ≥ 2 frames, and at least 7 tracks in all (a fundamental matrix needs 7).
 pub fn check_observations(meas: &Measurements) -> Result<()> {
-    let (nf, np) = (meas.n_frames(), meas.n_points());
-    if nf < 2 {
-        return Err(Error::TooFew {
-            what: "frames for a projective reconstruction",
-            needed: 2,
-            have: nf,
-        });
-    }
-    if np < 7 {
-        return Err(Error::TooFew {
-            what: "tracks for a projective reconstruction",
-            needed: 7,
-            have: np,
-        });
-    }
-    let mut per_frame = vec![0usize; nf];
-    let mut per_track = vec![0usize; np];
-    for (f, p) in meas.observed_pairs() {
-        per_frame[f] += 1;
-        per_track[p] += 1;
-        if !(meas.w[(2 * f, p)].is_finite() && meas.w[(2 * f + 1, p)].is_finite()) {
-            return Err(Error::Degenerate(format!(
-                "observed value of track {p} in frame {f} is not finite"
-            )));
-        }
-    }
-    if let Some(&have) = per_frame.iter().min()
-        && have < 6
+    if let Some((f, p)) = meas
+        .observed_pairs()
+        .find(|&(f, p)| !(meas.w[(2 * f, p)].is_finite() && meas.w[(2 * f + 1, p)].is_finite()))
     {
-        return Err(Error::TooFew {
-            what: "tracks seen in a frame (a projective camera has 11 degrees of freedom)",
-            needed: 6,
-            have,
-        });
+        return Err(Error::Degenerate(format!(
+            "observed value of track {p} in frame {f} is not finite"
+        )));
     }
-    if let Some(&have) = per_track.iter().min()
-        && have < 2
-    {
-        return Err(Error::TooFew {
-            what: "frames observing a track",
-            needed: 2,
-            have,
-        });
-    }
-    Ok(())
+    let unit = Normalization {
+        centre: [0.0, 0.0],
+        scale: 1.0,
+    };
+    check_graph(&graph(meas, &unit))
 }
 
 /// Projective reconstruction of `meas` from an affine factorization of the same
@@ -739,7 +707,7 @@ pub fn fit_observations(
     )
 }
 
-/// [`check_observations`] on a graph.
+/// The counts of [`check_observations`] on a graph.
 fn check_graph(g: &Graph) -> Result<()> {
     if g.n_cams < 2 {
         return Err(Error::TooFew {
