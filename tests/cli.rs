@@ -478,3 +478,82 @@ fn run_on_rendered_corner_recovers_structure() {
     }
     assert!((angle - 90.0).abs() < 3.0, "angle between faces {angle}°");
 }
+
+/// `synth --camera perspective` then `reconstruct --camera projective`: the JSON holds a
+/// projective block whose P and X reproduce the truth, and completed.txt is π(P X).
+#[test]
+fn projective_camera_end_to_end() {
+    let d = tmp("projective");
+    run_ok(bin().args(["synth", "--out"]).arg(&d).args([
+        "--camera",
+        "perspective",
+        "--distance",
+        "2.5",
+        "--noise",
+        "0",
+        "--frames",
+        "10",
+        "--points",
+        "40",
+        "--missing",
+        "0.3",
+    ]));
+    let out = d.join("r");
+    let log = run_ok(
+        bin()
+            .arg("reconstruct")
+            .arg(d.join("tracks.csv"))
+            .arg("--out")
+            .arg(&out)
+            .args(["--camera", "projective", "--no-robust"]),
+    );
+    assert!(log.contains("projective camera"), "{log}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("reconstruction.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["camera_model"], "projective");
+    let p = &json["projective"];
+    let cams = p["cameras"].as_array().unwrap();
+    let pts = p["points"].as_array().unwrap();
+    assert_eq!(cams.len(), 10);
+    assert_eq!(pts.len(), 40);
+    assert!(json["rms_px"].as_f64().unwrap() < 1e-9);
+    assert_eq!(json["rms_px"], p["rms_px"]);
+    // completed.txt (every frame and track, hidden entries included) equals π(P_f X_p) of the
+    // JSON's numbers, and the truth's noise-free projections.
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("truth.json")).unwrap()).unwrap();
+    let text = std::fs::read_to_string(out.join("completed.txt")).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| l.split_whitespace().map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 20);
+    for f in 0..10 {
+        let pm: Vec<Vec<f64>> = serde_json::from_value(cams[f]["p"].clone()).unwrap();
+        let tp: Vec<Vec<f64>> = serde_json::from_value(truth["frames"][f]["P"].clone()).unwrap();
+        for k in 0..40 {
+            let x: Vec<f64> = serde_json::from_value(pts[k]["x"].clone()).unwrap();
+            let proj = |m: &Vec<Vec<f64>>, x: &[f64]| {
+                let r: Vec<f64> = (0..3)
+                    .map(|i| (0..4).map(|j| m[i][j] * x[j]).sum())
+                    .collect();
+                [r[0] / r[2], r[1] / r[2]]
+            };
+            let q = proj(&pm, &x);
+            let xt: Vec<f64> = serde_json::from_value(truth["points"][k]["xyz"].clone()).unwrap();
+            let t = proj(&tp, &[xt[0], xt[1], xt[2], 1.0]);
+            for c in 0..2 {
+                assert!(
+                    (rows[2 * f + c][k] - q[c]).abs() < 1e-6,
+                    "frame {f} track {k}"
+                );
+                assert!(
+                    (q[c] - t[c]).abs() < 1e-6,
+                    "frame {f} track {k}: {q:?} vs truth {t:?}"
+                );
+            }
+        }
+    }
+}
