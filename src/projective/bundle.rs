@@ -571,7 +571,23 @@ pub fn minimize<M: BundleModel>(
     cfg: &LmConfig,
     progress: &mut Progress<'_>,
 ) -> Result<LmResult, String> {
+    minimize_fixed(model, g, cams, pts, &[], cfg, progress)
+}
+
+/// [`minimize`] with the cameras `f` where `fixed[f]` is true held where they are (their
+/// steps are zero; a stiff spring in the reduced system tells the other unknowns so).
+/// `fixed` may be empty (nothing fixed) or have one entry per camera.
+pub fn minimize_fixed<M: BundleModel>(
+    model: &M,
+    g: &Graph,
+    cams: &mut [f64],
+    pts: &mut [f64],
+    fixed: &[bool],
+    cfg: &LmConfig,
+    progress: &mut Progress<'_>,
+) -> Result<LmResult, String> {
     let start = Instant::now();
+    let is_fixed = |f: usize| fixed.get(f).copied().unwrap_or(false);
     let (cl, cd, pl, pd, m) = (
         model.cam_len(),
         model.cam_dim(),
@@ -830,6 +846,12 @@ pub fn minimize<M: BundleModel>(
                     }
                 }
             }
+            for f in (0..nf).filter(|&f| is_fixed(f)) {
+                for c1 in 0..cd {
+                    values[pattern.pos(f, f, c1, c1)] += 1e8 * mean_diag_u.max(f64::MIN_POSITIVE);
+                    rhs[(f * cd + c1, 0)] = 0.0;
+                }
+            }
             let mut y = vec![0.0; cd * pd];
             let mut ys: Vec<f64> = Vec::new();
             for p in 0..np {
@@ -894,7 +916,9 @@ pub fn minimize<M: BundleModel>(
                 }
             };
             llt.solve_in_place(rhs.as_mut());
-            let dc: Vec<f64> = (0..nf * cd).map(|i| rhs[(i, 0)]).collect();
+            let dc: Vec<f64> = (0..nf * cd)
+                .map(|i| if is_fixed(i / cd) { 0.0 } else { rhs[(i, 0)] })
+                .collect();
             if dc.iter().any(|v| !v.is_finite()) {
                 lambda *= nu;
                 nu *= 2.0;

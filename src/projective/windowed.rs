@@ -43,6 +43,11 @@ pub struct WindowConfig {
     /// ([`projective_start`]) rather than chaining affine windows ([`affine_start`]).
     /// Default true (measured: docs/results.md).
     pub projective: bool,
+    /// With `projective`: after chaining each window, a bundle adjustment (at most this
+    /// many solves) of it and the previous window, the previous window's own frames held
+    /// fixed — a sliding-window bundle adjustment that keeps the chain consistent as it
+    /// grows. 0 skips it. Default 20.
+    pub local_iterations: usize,
 }
 
 impl Default for WindowConfig {
@@ -52,6 +57,7 @@ impl Default for WindowConfig {
             overlap: 20,
             completion: CompletionConfig::default(),
             projective: true,
+            local_iterations: 20,
         }
     }
 }
@@ -248,10 +254,100 @@ pub fn projective_start(
             super::bundle::normalize(&mut pts[4 * p..4 * p + 4]);
             placed[p] = true;
         }
+        if !first && cfg.local_iterations > 0 {
+            // Sliding-window bundle adjustment: this window and the previous one, the
+            // previous window's own frames held fixed (they anchor the gauge).
+            let lo = start.saturating_sub(cfg.window - cfg.overlap);
+            local_refine(
+                g,
+                &mut cams,
+                &mut pts,
+                lo,
+                start,
+                end,
+                cfg.local_iterations,
+                pcfg,
+            )?;
+        }
         first = false;
         Ok(())
     })?;
     Ok((cams, pts))
+}
+
+/// Projective bundle adjustment of frames `lo..hi` and of every track seen in ≥ 2 of them,
+/// with the cameras of frames `lo..fixed_below` held fixed; results written back into
+/// `cams` / `pts` (flat, 12 per frame, 4 per track, in `g`'s numbering).
+#[allow(clippy::too_many_arguments)]
+fn local_refine(
+    g: &Graph,
+    cams: &mut [f64],
+    pts: &mut [f64],
+    lo: usize,
+    fixed_below: usize,
+    hi: usize,
+    iterations: usize,
+    pcfg: &super::ProjectiveConfig,
+) -> Result<()> {
+    let mut tracks = Vec::new();
+    let mut pt_ptr = vec![0usize];
+    let mut cam = Vec::new();
+    let mut w = Vec::new();
+    for p in 0..g.n_pts {
+        let r: Vec<usize> = g
+            .track(p)
+            .filter(|&o| (lo..hi).contains(&g.cam[o]))
+            .collect();
+        if r.len() < 2 {
+            continue;
+        }
+        tracks.push(p);
+        for o in r {
+            cam.push(g.cam[o] - lo);
+            w.push(g.w[o]);
+        }
+        pt_ptr.push(cam.len());
+    }
+    let local = Graph {
+        n_cams: hi - lo,
+        n_pts: tracks.len(),
+        pt_ptr,
+        cam,
+        w,
+    };
+    let mut c = cams[12 * lo..12 * hi].to_vec();
+    let mut x: Vec<f64> = tracks
+        .iter()
+        .flat_map(|&p| pts[4 * p..4 * p + 4].iter().copied())
+        .collect();
+    let fixed: Vec<bool> = (lo..hi).map(|f| f < fixed_below).collect();
+    let cfg = super::bundle::LmConfig {
+        max_iterations: iterations,
+        ..pcfg.refine.clone()
+    };
+    super::bundle::minimize_fixed(
+        &super::models::Projective,
+        &local,
+        &mut c,
+        &mut x,
+        &fixed,
+        &cfg,
+        &mut super::bundle::Progress {
+            observer: &mut NoopObserver,
+            name: "local-ba",
+            run: 0,
+            rms_scale: 1.0,
+        },
+    )
+    .map_err(|message| Error::Numerical {
+        stage: "sliding-window bundle adjustment",
+        message,
+    })?;
+    cams[12 * fixed_below..12 * hi].copy_from_slice(&c[12 * (fixed_below - lo)..]);
+    for (k, &p) in tracks.iter().enumerate() {
+        pts[4 * p..4 * p + 4].copy_from_slice(&x[4 * k..4 * k + 4]);
+    }
+    Ok(())
 }
 
 fn too_few_shared(start: usize, end: usize, have: usize, need: usize) -> Error {
