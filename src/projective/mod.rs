@@ -512,45 +512,25 @@ fn bridge(
     observer: &mut dyn Observer,
     stages: &mut Vec<StageReport>,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
-    let n_scalars = (2 * g.n_obs()).max(1) as f64;
     let (c, x) = match cfg.bridge {
         Bridge::Direct => (c, x),
         Bridge::Pose { eta } => {
-            let model = models::Pose { eta };
             let (mut c, mut x) = (c, x);
-            let t0 = Instant::now();
-            observer.on_event(&Event::StageStarted { stage: "pose" });
-            let before = (bundle::cost(&model, g, &c, &x) / n_scalars).sqrt() * px;
-            let r = bundle::minimize(
-                &model,
+            let stage = Stage {
+                name: "pose",
+                what: "pOSE",
+                rms_scale: px,
+            };
+            stage.run(
+                &models::Pose { eta },
                 g,
                 &mut c,
                 &mut x,
                 &cfg.pose,
-                &mut Progress {
-                    observer: &mut *observer,
-                    name: "pose",
-                    run,
-                    rms_scale: px * std::f64::consts::SQRT_2,
-                },
-            )
-            .map_err(|message| Error::Numerical {
-                stage: "pOSE",
-                message,
-            })?;
-            let seconds = t0.elapsed().as_secs_f64();
-            observer.on_event(&Event::StageFinished {
-                stage: "pose",
-                seconds,
-            });
-            stages.push(StageReport {
-                stage: "pose".into(),
-                status: r.report.status,
-                iterations: r.report.iterations,
-                rms_before_px: before,
-                rms_after_px: (r.report.final_cost / n_scalars).sqrt() * px,
-                seconds,
-            });
+                run,
+                observer,
+                stages,
+            )?;
             (c, x)
         }
     };
@@ -851,42 +831,22 @@ fn bundle_adjust(
 ) -> Result<ProjectiveFit> {
     let px = 1.0 / norm.scale;
     let n_scalars = (2 * g.n_obs()).max(1) as f64;
-    let t0 = Instant::now();
-    observer.on_event(&Event::StageStarted {
-        stage: "projective-ba",
-    });
-    let before = (bundle::cost(&models::Projective, g, &cams, &pts) / n_scalars).sqrt() * px;
-    let r = bundle::minimize(
+    let stage = Stage {
+        name: "projective-ba",
+        what: "projective bundle adjustment",
+        rms_scale: px,
+    };
+    let r = stage.run(
         &models::Projective,
         g,
         &mut cams,
         &mut pts,
         &cfg.refine,
-        &mut Progress {
-            observer: &mut *observer,
-            name: "projective-ba",
-            run,
-            rms_scale: px,
-        },
-    )
-    .map_err(|message| Error::Numerical {
-        stage: "projective bundle adjustment",
-        message,
-    })?;
-    let seconds = t0.elapsed().as_secs_f64();
-    observer.on_event(&Event::StageFinished {
-        stage: "projective-ba",
-        seconds,
-    });
+        run,
+        observer,
+        &mut stages,
+    )?;
     let rms_px = (r.report.final_cost / n_scalars).sqrt() * px;
-    stages.push(StageReport {
-        stage: "projective-ba".into(),
-        status: r.report.status,
-        iterations: r.report.iterations,
-        rms_before_px: before,
-        rms_after_px: rms_px,
-        seconds,
-    });
     let model = to_pixels(&cams, &pts, g, norm);
     Ok(ProjectiveFit {
         model,
@@ -896,6 +856,70 @@ fn bundle_adjust(
         report: r.report,
         schur_nnz: r.schur_nnz,
     })
+}
+
+/// One solver stage of the chain: its events, its run of [`bundle::minimize`] and its
+/// [`StageReport`] (RMS before and after: `rms_scale` × `sqrt(cost / #observed scalars)`,
+/// `rms_scale` = pixels per normalized unit).
+struct Stage {
+    /// Stage and solver name in events and reports.
+    name: &'static str,
+    /// Stage name in a numerical error.
+    what: &'static str,
+    rms_scale: f64,
+}
+
+impl Stage {
+    #[allow(clippy::too_many_arguments)]
+    fn run<M: bundle::BundleModel>(
+        &self,
+        model: &M,
+        g: &Graph,
+        cams: &mut [f64],
+        pts: &mut [f64],
+        cfg: &LmConfig,
+        run: usize,
+        observer: &mut dyn Observer,
+        stages: &mut Vec<StageReport>,
+    ) -> Result<bundle::LmResult> {
+        let n_scalars = (2 * g.n_obs()).max(1) as f64;
+        let rms = |cost: f64| (cost / n_scalars).sqrt() * self.rms_scale;
+        let t0 = Instant::now();
+        observer.on_event(&Event::StageStarted { stage: self.name });
+        let before = rms(bundle::cost(model, g, cams, pts));
+        let r = bundle::minimize(
+            model,
+            g,
+            cams,
+            pts,
+            cfg,
+            &mut Progress {
+                observer: &mut *observer,
+                name: self.name,
+                run,
+                // The engine divides by its residual count (m per observation).
+                rms_scale: self.rms_scale * (model.res_dim() as f64 / 2.0).sqrt(),
+            },
+        )
+        .map_err(|message| Error::Numerical {
+            stage: self.what,
+            message,
+        })?;
+        let seconds = t0.elapsed().as_secs_f64();
+        observer.on_event(&Event::StageFinished {
+            stage: self.name,
+            seconds,
+        });
+        stages.push(StageReport {
+            stage: self.name.into(),
+            status: r.report.status,
+            iterations: r.report.iterations,
+            rms_before_px: before,
+            rms_after_px: rms(r.report.final_cost),
+            seconds,
+        });
+        Ok(r)
+    }
 }
 
 /// `P_f = T [M_f t_f; 0 0 0 1] H`, `X_p = H⁻¹ (s_p, 1)` with `H` centring and scaling the
