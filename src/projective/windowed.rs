@@ -1,26 +1,29 @@
-//! An affine start for long sequences in time linear in the observations: affine
-//! factorizations of overlapping windows of frames, chained by the affine maps between
-//! their shared tracks.
+//! Starts for long sequences in time linear in the frames: overlapping windows of frames,
+//! each factorized on its own and chained into one frame.
 //!
 //! The dense affine completion ([`crate::completion`]) factorises a `(2F·4)²` camera system
 //! and a dense `F×N` start: fine for hundreds of frames, impossible for a 20 000-frame video.
 //! A video's tracks are short, so frames far apart share nothing and a window of frames is
-//! a small, well-connected problem:
+//! a small, well-connected problem. Windows are frames `[s, s + window)` for `s = 0, stride,
+//! 2·stride, …` (`stride = window − overlap`; the last one ends at the last frame), each with
+//! the tracks it sees in ≥ 2 of its frames, completed by the damped Wiberg solver
+//! ([`crate::completion::complete`], data-driven start). Window 0 fixes the global frame; a
+//! frame's camera comes from the first window that contains it, a track's point from the
+//! first window that places it.
 //!
-//! 1. Frames `[s, s + window)` for `s = 0, stride, 2·stride, …` (`stride = window −
-//!    overlap`; the last window ends at the last frame). Each window keeps the tracks it
-//!    sees in ≥ 2 of its frames and is completed by the damped Wiberg / VarPro solver
-//!    ([`crate::completion::complete`], data-driven start): `W_k ≈ M_k S_k + t_k 1ᵀ`.
-//! 2. Window 0 fixes the global affine frame. Window `k` is mapped into it by the affine
-//!    map `X ↦ A X + b` that best carries its points onto the already placed points of the
-//!    same tracks (linear least squares over the shared tracks, ≥ 4 needed); its cameras
-//!    become `M A⁻¹`, `t − M A⁻¹ b`. A frame's camera comes from the first window that
-//!    contains it, a track's point from the first window that places it.
-//! 3. Tracks no window placed (seen in < 2 frames of every window) are left at the origin:
-//!    the variable-projection stage that follows solves every point for its cameras first.
+//! * [`projective_start`] (the default): each window is fitted projectively
+//!   ([`super::fit`]) and mapped by the homography that best carries its points onto the
+//!   already placed ones; then a sliding-window bundle adjustment refines it with the
+//!   previous window, whose own frames are held fixed.
+//! * [`affine_start`]: the affine windows are chained by the affine maps `X ↦ A X + b`
+//!   between shared tracks (linear least squares, ≥ 4 tracks); the cameras become `M A⁻¹`,
+//!   `t − M A⁻¹ b`. Tracks no window placed are left at the origin for the
+//!   variable-projection stage that follows.
 //!
-//! Cost: `Σ_k` (one window's completion) — with a fixed window, linear in the frames and
-//! the observations; memory of one window at a time plus `O(F + N)` for the result.
+//! Cost: `Σ_k` (one window's fit and local adjustment) — with a fixed window, linear in the
+//! frames and the observations; memory of one window at a time plus `O(F + N)` for the
+//! result. How many solves the global bundle adjustment then needs still grows with the
+//! sequence (docs/results.md).
 
 use faer::Mat;
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
