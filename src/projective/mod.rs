@@ -301,19 +301,23 @@ impl Normalization {
     /// Centroid of the observed points and the scale that makes their mean distance from it
     /// √2 (1 for a single point or coincident points).
     pub fn of(meas: &Measurements) -> Self {
+        Self::of_points(|| {
+            meas.observed_pairs()
+                .map(|(f, p)| [meas.w[(2 * f, p)], meas.w[(2 * f + 1, p)]])
+        })
+    }
+
+    /// [`Normalization::of`] for any set of image points (`points()` is iterated twice).
+    pub fn of_points<I: Iterator<Item = [f64; 2]>>(points: impl Fn() -> I) -> Self {
         let (mut cx, mut cy, mut n) = (0.0, 0.0, 0usize);
-        for (f, p) in meas.observed_pairs() {
-            cx += meas.w[(2 * f, p)];
-            cy += meas.w[(2 * f + 1, p)];
+        for q in points() {
+            cx += q[0];
+            cy += q[1];
             n += 1;
         }
         let n = n.max(1) as f64;
         let (cx, cy) = (cx / n, cy / n);
-        let mut d = 0.0;
-        for (f, p) in meas.observed_pairs() {
-            d += ((meas.w[(2 * f, p)] - cx).powi(2) + (meas.w[(2 * f + 1, p)] - cy).powi(2)).sqrt();
-        }
-        let d = d / n;
+        let d = points().map(|q| (q[0] - cx).hypot(q[1] - cy)).sum::<f64>() / n;
         let scale = if d > 0.0 && d.is_finite() {
             std::f64::consts::SQRT_2 / d
         } else {
@@ -605,23 +609,7 @@ pub fn fit_observations(
             o.track, o.frame
         )));
     }
-    // Normalization from the observations.
-    let n = obs.len().max(1) as f64;
-    let cx = obs.iter().map(|o| o.xy[0]).sum::<f64>() / n;
-    let cy = obs.iter().map(|o| o.xy[1]).sum::<f64>() / n;
-    let d = obs
-        .iter()
-        .map(|o| ((o.xy[0] - cx).powi(2) + (o.xy[1] - cy).powi(2)).sqrt())
-        .sum::<f64>()
-        / n;
-    let norm = Normalization {
-        centre: [cx, cy],
-        scale: if d > 0.0 && d.is_finite() {
-            std::f64::consts::SQRT_2 / d
-        } else {
-            1.0
-        },
-    };
+    let norm = Normalization::of_points(|| obs.iter().map(|o| o.xy));
     let mut pt_ptr = vec![0usize; n_tracks + 1];
     for o in obs {
         pt_ptr[o.track + 1] += 1;
