@@ -307,29 +307,12 @@ impl ProjectiveResult {
             points: Vec::new(),
         }
         .triangulate(outlier_meas);
-        let residuals = |m: &Measurements, x: &[f64; 4], p: usize| -> (f64, usize) {
-            let mut ss = 0.0;
-            let mut n = 0;
-            for f in 0..m.n_frames() {
-                if m.is_visible(f, p) {
-                    let q = projective::project(&model.cameras[f], x);
-                    ss += (q[0] - m.w[(2 * f, p)]).powi(2) + (q[1] - m.w[(2 * f + 1, p)]).powi(2);
-                    n += 1;
-                }
-            }
-            (ss, n)
-        };
+        let fitted = |f: usize, p: usize| model.project(f, p);
+        let outliers =
+            |f: usize, k: usize| projective::project(&model.cameras[f], &outlier_points[k]);
         let cameras = (0..fit.n_frames())
             .map(|f| {
-                let (mut ss, mut n) = (0.0, 0);
-                for p in 0..meas.n_points() {
-                    if meas.is_visible(f, p) {
-                        let q = model.project(f, p);
-                        ss += (q[0] - meas.w[(2 * f, p)]).powi(2)
-                            + (q[1] - meas.w[(2 * f + 1, p)]).powi(2);
-                        n += 1;
-                    }
-                }
+                let (ss, n) = frame_residuals(&fitted, meas, f);
                 ProjectiveFrame {
                     frame: fit.frame_ids()[f].clone(),
                     p: model.camera_matrix(f),
@@ -340,7 +323,7 @@ impl ProjectiveResult {
             .collect();
         let mut points: Vec<(usize, ProjectivePoint)> = Vec::new();
         for (p, &input_p) in used_tracks.iter().enumerate() {
-            let (ss, n) = residuals(meas, &model.points[p], p);
+            let (ss, n) = point_residuals(&fitted, meas, p);
             points.push((
                 input_p,
                 ProjectivePoint {
@@ -353,7 +336,7 @@ impl ProjectiveResult {
             ));
         }
         for (k, &p) in outlier_kept.iter().enumerate() {
-            let (ss, n) = residuals(outlier_meas, &outlier_points[k], k);
+            let (ss, n) = point_residuals(&outliers, outlier_meas, k);
             points.push((
                 kept_tracks[p],
                 ProjectivePoint {
@@ -775,7 +758,7 @@ impl Reconstruction {
         }
         let frames = (0..fit.n_frames())
             .map(|f| {
-                let (ss, n) = frame_residuals(&model, &meas, f);
+                let (ss, n) = frame_residuals(&metric_predictor(&model), &meas, f);
                 let r = model.rotations[f].matrix();
                 FrameResult {
                     frame: fit.frame_ids()[f].clone(),
@@ -790,7 +773,7 @@ impl Reconstruction {
         // Points in the input's track order: fitted tracks, then outliers interleaved.
         let mut points: Vec<(usize, PointResult)> = Vec::with_capacity(used_tracks.len());
         for (p, &input_p) in used_tracks.iter().enumerate() {
-            let (ss, n) = point_residuals(&model, &meas, p);
+            let (ss, n) = point_residuals(&metric_predictor(&model), &meas, p);
             let x = model.points[p];
             points.push((
                 input_p,
@@ -804,7 +787,7 @@ impl Reconstruction {
             ));
         }
         for (k, &p) in outlier_kept.iter().enumerate() {
-            let (ss, n) = point_residuals(&outlier_model, &outlier_meas, k);
+            let (ss, n) = point_residuals(&metric_predictor(&outlier_model), &outlier_meas, k);
             let x = outlier_model.points[k];
             points.push((
                 kept_tracks[p],
@@ -1172,24 +1155,44 @@ fn rms_of(ss: f64, n_pairs: usize) -> f64 {
 }
 
 /// Sum of squared residuals and number of observed pairs among `pairs` (frame, track).
+/// Sum of squared residuals `‖predict(f, p) − w_fp‖²` and number of observed pairs among
+/// `pairs` (frame, track): the per-frame and per-track figures of every camera model.
 fn residual_sum(
-    model: &MetricModel,
+    predict: &impl Fn(usize, usize) -> [f64; 2],
     meas: &Measurements,
     pairs: impl Iterator<Item = (usize, usize)>,
 ) -> (f64, usize) {
     pairs
         .filter(|&(f, p)| meas.is_visible(f, p))
         .fold((0.0, 0), |(ss, n), (f, p)| {
-            (ss + residual2(model, meas, f, p), n + 1)
+            let q = predict(f, p);
+            let (dx, dy) = (q[0] - meas.w[(2 * f, p)], q[1] - meas.w[(2 * f + 1, p)]);
+            (ss + dx * dx + dy * dy, n + 1)
         })
 }
 
-fn frame_residuals(model: &MetricModel, meas: &Measurements, f: usize) -> (f64, usize) {
-    residual_sum(model, meas, (0..meas.n_points()).map(|p| (f, p)))
+fn frame_residuals(
+    predict: &impl Fn(usize, usize) -> [f64; 2],
+    meas: &Measurements,
+    f: usize,
+) -> (f64, usize) {
+    residual_sum(predict, meas, (0..meas.n_points()).map(|p| (f, p)))
 }
 
-fn point_residuals(model: &MetricModel, meas: &Measurements, p: usize) -> (f64, usize) {
-    residual_sum(model, meas, (0..meas.n_frames()).map(|f| (f, p)))
+fn point_residuals(
+    predict: &impl Fn(usize, usize) -> [f64; 2],
+    meas: &Measurements,
+    p: usize,
+) -> (f64, usize) {
+    residual_sum(predict, meas, (0..meas.n_frames()).map(|f| (f, p)))
+}
+
+/// [`MetricModel::project`] as a predictor for [`residual_sum`].
+fn metric_predictor(model: &MetricModel) -> impl Fn(usize, usize) -> [f64; 2] + '_ {
+    move |f, p| {
+        let q = model.project(f, p);
+        [q[0], q[1]]
+    }
 }
 
 /// Affine factorization from a completion (`W ≈ M̂Ŝ + t1ᵀ` on observed entries). The
@@ -1260,13 +1263,6 @@ fn affine_points(meas: &Measurements, affine: &Affine) -> Mat<f64> {
         }
     }
     out
-}
-
-fn residual2(model: &MetricModel, meas: &Measurements, f: usize, p: usize) -> f64 {
-    let q = model.project(f, p);
-    let dx = q[0] - meas.w[(2 * f, p)];
-    let dy = q[1] - meas.w[(2 * f + 1, p)];
-    dx * dx + dy * dy
 }
 
 fn validate_config(c: &Config) -> Result<()> {
