@@ -26,10 +26,10 @@ pub enum CameraModel {
     /// stages (warm start, metric blocks of the result) run with the scaled orthographic
     /// model.
     Projective,
-    /// Pinhole perspective camera with intrinsics `K`, rotation `R_f` and translation
-    /// `t_f`: `w ≃ K (R_f X + t_f)`. Used by [`crate::synth`] for perspective scenes; the
-    /// Euclidean reconstruction with this model is not built yet (the pipeline returns
-    /// [`crate::Error::InvalidConfig`] for it; use [`CameraModel::Projective`]).
+    /// Pinhole perspective camera with intrinsics `K_f` (focal length, principal point,
+    /// optionally one radial coefficient), rotation `R_f` and translation `t_f`:
+    /// `w ≃ K_f (R_f X + t_f)`. The projective stages run first, then the Euclidean upgrade
+    /// and the metric bundle adjustment ([`crate::perspective`]).
     Perspective,
 }
 
@@ -42,6 +42,11 @@ impl CameraModel {
             CameraModel::Orthographic => CameraModel::Orthographic,
             _ => CameraModel::ScaledOrthographic,
         }
+    }
+
+    /// Whether the projective stages run (projective and perspective cameras).
+    pub fn is_projective(self) -> bool {
+        matches!(self, CameraModel::Projective | CameraModel::Perspective)
     }
 
     /// Whether the model is affine (orthographic or scaled orthographic).

@@ -27,6 +27,7 @@ pub mod measurements;
 pub mod metric;
 pub mod observer;
 pub mod output;
+pub mod perspective;
 pub mod projective;
 pub mod reconstruction;
 #[cfg(feature = "rerun")]

@@ -28,6 +28,7 @@ use rand::SeedableRng;
 
 use crate::completion::{self, CompletionConfig, CompletionModel, CompletionSolverKind};
 use crate::metric::{self, MetricConfig, MetricUpgrade};
+use crate::perspective::{self, PerspectiveConfig};
 use crate::projective::{self, ProjectiveConfig, ProjectiveModel};
 use crate::refine::{self, RefineConfig, RefineResult};
 use crate::robust::{self, RobustConfig};
@@ -63,8 +64,12 @@ pub struct Config {
     pub seed: u64,
     /// Levenberg–Marquardt refinement; `None` skips it. Default on.
     pub refine: Option<RefineConfig>,
-    /// The projective stages, used with [`CameraModel::Projective`].
+    /// The projective stages, used with [`CameraModel::Projective`] and
+    /// [`CameraModel::Perspective`].
     pub projective: ProjectiveConfig,
+    /// The Euclidean upgrade and metric bundle adjustment, used with
+    /// [`CameraModel::Perspective`] (known intrinsics go in its `intrinsics`).
+    pub perspective: PerspectiveConfig,
     /// Warn "far from rank 3" when σ4/σ3 exceeds this. Default 0.1.
     pub rank3_warning_ratio: f64,
     /// Warn "close to rank 2" when σ3/σ2 is below this. Default 0.05.
@@ -95,6 +100,7 @@ impl Default for Config {
             seed: 0,
             refine: Some(RefineConfig::default()),
             projective: ProjectiveConfig::default(),
+            perspective: PerspectiveConfig::default(),
             rank3_warning_ratio: 0.1,
             rank2_warning_ratio: 0.05,
         }
@@ -362,6 +368,177 @@ impl ProjectiveResult {
     }
 }
 
+/// One frame's metric perspective camera: `x_cam = R X + t`, `w = π(K x_cam)`.
+#[derive(Debug, Clone, Serialize)]
+pub struct PerspectiveFrame {
+    pub frame: Id,
+    /// World-to-camera rotation (rows: the camera axes in world coordinates).
+    pub rotation: [[f64; 3]; 3],
+    /// World-to-camera translation.
+    pub translation: [f64; 3],
+    /// Camera centre `−Rᵀ t`, world coordinates.
+    pub centre: [f64; 3],
+    /// Focal length, pixels.
+    pub focal_px: f64,
+    /// RMS reprojection error of this frame's observations, pixels.
+    pub rms_px: f64,
+    pub n_observations: usize,
+}
+
+/// The intrinsics of a perspective reconstruction.
+#[derive(Debug, Clone, Serialize)]
+pub struct PerspectiveIntrinsics {
+    /// `"shared"` (one focal length for the sequence), `"per-frame"` or `"given"`.
+    pub focal: &'static str,
+    /// The focal length (the median over frames when per frame), pixels.
+    pub focal_px: f64,
+    /// `K` (3×3) of the first frame, pixels.
+    pub k: [[f64; 3]; 3],
+    pub principal_point: [f64; 2],
+    /// `"given"`, `"image centre"`, `"track bounding box"`, or `"estimated"`.
+    pub principal_point_source: &'static str,
+    /// Radial distortion `k₁` of normalised coordinates (0 when not estimated).
+    pub k1: f64,
+    pub image_size: Option<[u32; 2]>,
+}
+
+/// The metric perspective reconstruction ([`crate::perspective`]): world frame = the first
+/// camera's, unit = RMS distance of the fitted points from their centroid.
+#[derive(Debug, Clone, Serialize)]
+pub struct PerspectiveResult {
+    /// Reprojection RMS over the fit's observed scalars, pixels.
+    pub rms_px: f64,
+    pub intrinsics: PerspectiveIntrinsics,
+    pub self_calibration: perspective::SelfCalibration,
+    pub stages: Vec<projective::StageReport>,
+    pub cameras: Vec<PerspectiveFrame>,
+    /// In the input's track order (fitted and outlier tracks, as `points`).
+    pub points: Vec<PointResult>,
+    /// Entries the robust loss down-weights below one half: `[frame, track]` ids.
+    pub downweighted: Vec<(Id, Id)>,
+    /// Fraction of observations in front of their camera.
+    pub in_front: f64,
+    /// The fitted model (fit frames × fit tracks), for library users.
+    #[serde(skip)]
+    pub model: perspective::PerspectiveModel,
+    /// Points of the outlier tracks given the fitted cameras.
+    #[serde(skip)]
+    pub outlier_points: Vec<Vector3<f64>>,
+}
+
+impl PerspectiveResult {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        pf: perspective::PerspectiveFit,
+        cfg: &PerspectiveConfig,
+        fit: &TrackTable,
+        meas: &Measurements,
+        outlier_meas: &Measurements,
+        outlier_kept: &[usize],
+        kept: &TrackTable,
+        kept_tracks: &[usize],
+        used_tracks: &[usize],
+    ) -> Self {
+        let model = pf.model;
+        let nf = model.rotations.len();
+        let outlier_points: Vec<Vector3<f64>> = ProjectiveModel {
+            cameras: (0..nf).map(|f| model.camera_matrix(f)).collect(),
+            points: Vec::new(),
+        }
+        .triangulate(outlier_meas)
+        .iter()
+        .map(|x| Vector3::new(x[0] / x[3], x[1] / x[3], x[2] / x[3]))
+        .collect();
+        let fitted = |f: usize, p: usize| model.project(f, p);
+        let outliers = |f: usize, k: usize| model.project_point(f, &outlier_points[k]);
+        let cameras = (0..nf)
+            .map(|f| {
+                let (ss, n) = frame_residuals(&fitted, meas, f);
+                let r = model.rotations[f];
+                let (t, c) = (model.translations[f], model.centre(f));
+                PerspectiveFrame {
+                    frame: fit.frame_ids()[f].clone(),
+                    rotation: std::array::from_fn(|a| std::array::from_fn(|b| r[(a, b)])),
+                    translation: [t[0], t[1], t[2]],
+                    centre: [c[0], c[1], c[2]],
+                    focal_px: model.focal_px[f],
+                    rms_px: rms_of(ss, n),
+                    n_observations: n,
+                }
+            })
+            .collect();
+        let mut points: Vec<(usize, PointResult)> = Vec::new();
+        for (p, &input_p) in used_tracks.iter().enumerate() {
+            let (ss, n) = point_residuals(&fitted, meas, p);
+            let x = model.points[p];
+            points.push((
+                input_p,
+                PointResult {
+                    track: fit.track_ids()[p].clone(),
+                    xyz: [x[0], x[1], x[2]],
+                    inlier: true,
+                    rms_px: rms_of(ss, n),
+                    n_observations: n,
+                },
+            ));
+        }
+        for (k, &p) in outlier_kept.iter().enumerate() {
+            let (ss, n) = point_residuals(&outliers, outlier_meas, k);
+            let x = outlier_points[k];
+            points.push((
+                kept_tracks[p],
+                PointResult {
+                    track: kept.track_ids()[p].clone(),
+                    xyz: [x[0], x[1], x[2]],
+                    inlier: false,
+                    rms_px: rms_of(ss, n),
+                    n_observations: n,
+                },
+            ));
+        }
+        points.sort_by_key(|(i, _)| *i);
+        let mut focals = model.focal_px.clone();
+        focals.sort_by(f64::total_cmp);
+        let k0 = model.k(0);
+        let intrinsics = PerspectiveIntrinsics {
+            focal: if cfg.intrinsics.focal_px.is_some() {
+                "given"
+            } else if cfg.per_frame_focal {
+                "per-frame"
+            } else {
+                "shared"
+            },
+            focal_px: focals.get(focals.len() / 2).copied().unwrap_or(f64::NAN),
+            k: std::array::from_fn(|a| std::array::from_fn(|b| k0[(a, b)])),
+            principal_point: model.principal_point,
+            principal_point_source: if pf.principal_point_estimated {
+                "estimated"
+            } else {
+                pf.assumed.principal_point_source
+            },
+            k1: model.k1,
+            image_size: cfg.intrinsics.image_size,
+        };
+        let downweighted = pf
+            .downweighted
+            .iter()
+            .map(|&(f, p)| (fit.frame_ids()[f].clone(), fit.track_ids()[p].clone()))
+            .collect();
+        Self {
+            rms_px: pf.rms_px,
+            intrinsics,
+            self_calibration: pf.selfcal,
+            stages: pf.stages,
+            cameras,
+            points: points.into_iter().map(|(_, p)| p).collect(),
+            downweighted,
+            in_front: pf.in_front,
+            model,
+            outlier_points,
+        }
+    }
+}
+
 /// Input summary.
 #[derive(Debug, Clone, Serialize)]
 pub struct InputSummary {
@@ -402,10 +579,12 @@ pub struct Reconstruction {
     /// Present when the robust pass ran.
     pub robust: Option<RobustReport>,
     pub refinement: Option<RefinementReport>,
-    /// Present with the projective camera: `P_f`, `X_p` and the stages' reports. `frames`
-    /// and `points` then hold the scaled-orthographic model the projective stages start
-    /// from.
+    /// Present with the projective and perspective cameras: `P_f`, `X_p` and the stages'
+    /// reports. `frames` and `points` then hold the scaled-orthographic model the
+    /// projective stages start from.
     pub projective: Option<ProjectiveResult>,
+    /// Present with the perspective camera: intrinsics, poses, Euclidean points.
+    pub perspective: Option<PerspectiveResult>,
     pub input: InputSummary,
     /// Tracks and frames not used, with reasons.
     pub set_aside: Vec<SetAside>,
@@ -545,7 +724,7 @@ impl Reconstruction {
                 min_inlier_fraction,
             } = &r.verdict
             {
-                if config.camera != CameraModel::Projective {
+                if !config.camera.is_projective() {
                     return Err(Error::NoRigidMajority {
                         reason: format!("{reason:?}"),
                         inlier_fraction: *inlier_fraction,
@@ -598,7 +777,7 @@ impl Reconstruction {
         // perspective), refitting while its verdict changes (at most
         // `PROJECTIVE_VERDICT_ROUNDS` times).
         if let (Some(rc), Some(report)) = (&config.robust, robust_report.as_mut())
-            && config.camera == CameraModel::Projective
+            && config.camera.is_projective()
         {
             let before = inlier.clone();
             let flagged_before = flagged.len();
@@ -740,6 +919,41 @@ impl Reconstruction {
             points: vec![Vector3::repeat(f64::NAN); outlier_kept.len()],
         };
         outlier_model.triangulate(&outlier_meas);
+        let perspective = match (&projective, config.camera) {
+            (Some(pf), CameraModel::Perspective) => {
+                let per = timer.run("perspective", |obs| {
+                    perspective::fit(&meas, &pf.model, &config.perspective, 0, obs)
+                })?;
+                for st in &per.stages {
+                    if st.status == SolverStatus::Stalled {
+                        warnings.push(format!(
+                            "perspective stage {} stalled after {} iterations",
+                            st.stage, st.iterations
+                        ));
+                    }
+                }
+                if per.in_front < 0.95 {
+                    warnings.push(format!(
+                        "only {:.1} % of the observations are in front of their camera after \
+                         the Euclidean upgrade: the self-calibration is unreliable (weak \
+                         perspective or degenerate motion)",
+                        100.0 * per.in_front
+                    ));
+                }
+                Some(PerspectiveResult::new(
+                    per,
+                    &config.perspective,
+                    &fit,
+                    &meas,
+                    &outlier_meas,
+                    &outlier_kept,
+                    &kept,
+                    &kept_tracks,
+                    &used_tracks,
+                ))
+            }
+            _ => None,
+        };
         let projective = projective.map(|pf| {
             ProjectiveResult::new(
                 pf,
@@ -807,7 +1021,11 @@ impl Reconstruction {
             camera_model: config.camera,
             frames,
             points: points.into_iter().map(|(_, p)| p).collect(),
-            rms_px: projective.as_ref().map_or(metric_rms_px, |p| p.rms_px),
+            rms_px: match (&perspective, &projective) {
+                (Some(p), _) => p.rms_px,
+                (None, Some(p)) => p.rms_px,
+                _ => metric_rms_px,
+            },
             metric_rms_px,
             metric_upgrade: upgrade,
             rank_ratio,
@@ -817,6 +1035,7 @@ impl Reconstruction {
             robust: robust_report,
             refinement,
             projective,
+            perspective,
             input: InputSummary {
                 frames: table.n_frames(),
                 tracks: table.n_tracks(),
@@ -849,6 +1068,21 @@ impl Reconstruction {
     pub fn completed_matrix(&self) -> Mat<f64> {
         let (f, n) = (self.input_frame_ids.len(), self.input_track_ids.len());
         let mut out = Mat::from_fn(2 * f, n, |_, _| f64::NAN);
+        if let Some(pr) = &self.perspective {
+            for (kf, &fi) in self.kept_frames.iter().enumerate() {
+                for (kp, &pi) in self.kept_tracks.iter().enumerate() {
+                    let q = pr.model.project(kf, kp);
+                    out[(2 * fi, pi)] = q[0];
+                    out[(2 * fi + 1, pi)] = q[1];
+                }
+                for (k, &pi) in self.outlier_tracks.iter().enumerate() {
+                    let q = pr.model.project_point(kf, &pr.outlier_points[k]);
+                    out[(2 * fi, pi)] = q[0];
+                    out[(2 * fi + 1, pi)] = q[1];
+                }
+            }
+            return out;
+        }
         if let Some(pr) = &self.projective {
             for (kf, &fi) in self.kept_frames.iter().enumerate() {
                 for (kp, &pi) in self.kept_tracks.iter().enumerate() {
@@ -1036,7 +1270,7 @@ fn fit_selection(
     refine::fix_gauge(&mut model, affine_camera);
     let mirrored = metric::apply_necker_convention(&mut model);
 
-    let projective = if config.camera == CameraModel::Projective {
+    let projective = if config.camera.is_projective() {
         let start = projective::AffineStart {
             m: affine.m_hat.as_ref(),
             s: affine.s_hat.as_ref(),
@@ -1122,7 +1356,7 @@ fn min_points_per_frame(config: &Config, complete: bool) -> usize {
     if !complete {
         m = m.max(4);
     }
-    if config.camera == CameraModel::Projective {
+    if config.camera.is_projective() {
         m = m.max(6);
     }
     m
@@ -1266,16 +1500,8 @@ fn affine_points(meas: &Measurements, affine: &Affine) -> Mat<f64> {
 }
 
 fn validate_config(c: &Config) -> Result<()> {
-    if c.camera == CameraModel::Perspective {
-        return Err(Error::InvalidConfig {
-            field: "camera",
-            message: "the Euclidean perspective reconstruction (self-calibration) is not built \
-                      yet; use the projective camera, which returns P_f and X_p up to a 4×4 \
-                      homography"
-                .into(),
-        });
-    }
     c.projective.validate()?;
+    c.perspective.validate()?;
     if c.min_frames_per_track < 2 {
         return Err(Error::InvalidConfig {
             field: "min_frames_per_track",

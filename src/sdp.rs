@@ -21,7 +21,7 @@ use clarabel::solver::{
     DefaultSettings, DefaultSolver, IPSolver, PSDTriangleConeT, SolverStatus, SupportedConeT,
     ZeroConeT,
 };
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nalgebra::{DMatrix, Matrix3, SymmetricEigen, Vector3};
 
 use crate::error::{Error, Result};
 
@@ -114,67 +114,129 @@ pub fn params_from_sym(m: &Matrix3<f64>) -> [f64; 6] {
     ]
 }
 
-/// (row, col) of each parameter.
-const IJ: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
-
 /// Solves `min_l ‖A l − b‖²` subject to `L(l) ⪰ 0` and, optionally, `c·l = d`.
 ///
 /// `a` holds the rows of `A` (m×6) in the parameterisation
 /// `l = [L00, L01, L02, L11, L12, L22]`; `b` has length m. `equality = Some((c, d))` adds
 /// the linear constraint `c·l = d` (the normalisation of the scaled-orthographic upgrade,
-/// where `b = 0`).
-///
-/// Method: the quadratic cone program
-/// `min ½ xᵀPx + qᵀx  s.t.  svec(L(x)) ∈ S³₊ (, c·x = d)` with `P = 2AᵀA`, `q = −2Aᵀb`,
-/// solved by clarabel's primal-dual interior-point method (Goulden, Stellato & Banjac,
-/// "Clarabel: an interior-point solver for conic programs with quadratic objectives",
-/// arXiv:2405.12762, 2024), PSD cone in the scaled-triangle (svec) convention
-/// `[L00, √2 L01, L11, √2 L02, √2 L12, L22]`. Before solving, the problem is rescaled:
-/// a congruence `L = T Ľ T` with `T = diag(t)`, `t_k = ‖A[:, kk]‖^{-1/2}` (unit-norm
-/// diagonal columns, preserves the cone), the unknown is divided by an estimate `ρ` of its
-/// magnitude and the objective by the mean squared column norm, so that `P`, `q` and the
-/// solution are O(1) whatever the magnitude of the rows; the answer is mapped back.
-/// The returned `L` is symmetrised and, if the solver stopped slightly outside the cone,
-/// projected onto it (negative eigenvalues clamped).
-///
-/// Complexity: O(m) to form `AᵀA` and `Aᵀb`, then a fixed-size 6-variable conic solve
-/// (each interior-point iteration is O(1) in m; typically 10–30 iterations).
+/// where `b = 0`). The 3×3 case of [`psd_least_squares_sym`], which documents the method.
 ///
 /// Errors: [`Error::TooFew`] if `a` is empty, [`Error::Dimension`] if `b.len() != a.len()`,
 /// [`Error::Degenerate`] for non-finite input, [`Error::InvalidConfig`] for bad settings,
 /// [`Error::Numerical`] if clarabel rejects the assembled problem. How the solver ended is
 /// reported in [`PsdLsqSolution::status`].
-#[allow(clippy::needless_range_loop)] // fixed 6×6 index arithmetic reads clearer
 pub fn psd_least_squares(
     a: &[[f64; 6]],
     b: &[f64],
     equality: Option<([f64; 6], f64)>,
     settings: &SdpSettings,
 ) -> Result<PsdLsqSolution> {
+    let rows: Vec<Vec<f64>> = a.iter().map(|r| r.to_vec()).collect();
+    let eq = equality.as_ref().map(|(c, d)| (&c[..], *d));
+    let sol = psd_least_squares_sym(3, &rows, b, eq, settings)?;
+    Ok(PsdLsqSolution {
+        l: Matrix3::from_fn(|i, j| sol.l[(i, j)]),
+        objective: sol.objective,
+        status: sol.status,
+        iterations: sol.iterations,
+        seconds: sol.seconds,
+    })
+}
+
+/// Result of [`psd_least_squares_sym`].
+#[derive(Debug, Clone)]
+pub struct SymPsdSolution {
+    /// The symmetric PSD estimate (n×n).
+    pub l: DMatrix<f64>,
+    /// `‖A l − b‖²` at the returned `l`, on the original (unscaled) data.
+    pub objective: f64,
+    /// How the solver ended.
+    pub status: SdpStatus,
+    /// Interior-point iterations.
+    pub iterations: u32,
+    /// Wall-clock seconds spent in this call.
+    pub seconds: f64,
+}
+
+/// `(row, col)` of each parameter of a symmetric n×n matrix: the upper triangle, row by
+/// row (`n = 3`: `[L00, L01, L02, L11, L12, L22]`; `n = 4` is the absolute dual quadric's
+/// 10-vector).
+pub fn sym_index(n: usize) -> Vec<(usize, usize)> {
+    (0..n).flat_map(|i| (i..n).map(move |j| (i, j))).collect()
+}
+
+/// Coefficient row of the bilinear form `aᵀ L b` in the parameterisation of [`sym_index`].
+pub fn bilinear_row_n(a: &[f64], b: &[f64]) -> Vec<f64> {
+    sym_index(a.len())
+        .into_iter()
+        .map(|(i, j)| {
+            if i == j {
+                a[i] * b[i]
+            } else {
+                a[i] * b[j] + a[j] * b[i]
+            }
+        })
+        .collect()
+}
+
+/// Solves `min_l ‖A l − b‖²` subject to `L(l) ⪰ 0` (n×n symmetric, parameters as in
+/// [`sym_index`]) and, optionally, `c·l = d`.
+///
+/// Method: the quadratic cone program
+/// `min ½ xᵀPx + qᵀx  s.t.  svec(L(x)) ∈ Sⁿ₊ (, c·x = d)` with `P = 2AᵀA`, `q = −2Aᵀb`,
+/// solved by clarabel's primal-dual interior-point method (Goulden, Stellato & Banjac,
+/// "Clarabel: an interior-point solver for conic programs with quadratic objectives",
+/// arXiv:2405.12762, 2024), PSD cone in the scaled-triangle (svec) convention
+/// (upper triangle column by column, off-diagonal entries times √2). Before solving, the
+/// problem is rescaled: a congruence `L = T Ľ T` with `T = diag(t)`, `t_k = ‖A[:, kk]‖^{-1/2}`
+/// (unit-norm diagonal columns, preserves the cone), the unknown is divided by an estimate
+/// `ρ` of its magnitude and the objective by the mean squared column norm, so that `P`, `q`
+/// and the solution are O(1) whatever the magnitude of the rows; the answer is mapped back.
+/// The returned `L` is symmetrised and, if the solver stopped slightly outside the cone,
+/// projected onto it (negative eigenvalues clamped).
+///
+/// Complexity: O(m p²) to form `AᵀA` (`p = n(n+1)/2` unknowns), then a fixed-size conic
+/// solve (each interior-point iteration is O(p³), independent of m; typically 10–30
+/// iterations).
+///
+/// Errors as [`psd_least_squares`]; [`Error::Dimension`] also when a row's length is not
+/// `n(n+1)/2`.
+pub fn psd_least_squares_sym(
+    n: usize,
+    a: &[Vec<f64>],
+    b: &[f64],
+    equality: Option<(&[f64], f64)>,
+    settings: &SdpSettings,
+) -> Result<SymPsdSolution> {
     let start = Instant::now();
-    validate(a, b, equality.as_ref(), settings)?;
+    let ij = sym_index(n);
+    let np = ij.len();
+    validate(np, a, b, equality, settings)?;
     #[cfg(feature = "builtin-lapack")]
     crate::lapack_shim::ensure_linked();
 
     // Normal equations: M = AᵀA, v = Aᵀb.
-    let mut m = [[0.0f64; 6]; 6];
-    let mut v = [0.0f64; 6];
+    let mut m = vec![vec![0.0f64; np]; np];
+    let mut v = vec![0.0f64; np];
     for (row, &bi) in a.iter().zip(b) {
-        for p in 0..6 {
+        for p in 0..np {
             v[p] += row[p] * bi;
-            for q in p..6 {
+            for q in p..np {
                 m[p][q] += row[p] * row[q];
             }
         }
     }
-    for p in 0..6 {
+    for p in 0..np {
         for q in 0..p {
             m[p][q] = m[q][p];
         }
     }
+    let diag_param: Vec<usize> = (0..n)
+        .map(|i| ij.iter().position(|&(r, c)| r == i && c == i).unwrap_or(0))
+        .collect();
 
     // Congruence scaling t (unit diagonal columns), τ_k = t_i t_j for parameter k = (i, j).
-    let diag_norms = [m[0][0].sqrt(), m[3][3].sqrt(), m[5][5].sqrt()];
+    let diag_norms: Vec<f64> = diag_param.iter().map(|&k| m[k][k].sqrt()).collect();
     let positive: Vec<f64> = diag_norms.iter().copied().filter(|x| *x > 0.0).collect();
     let fallback = if positive.is_empty() {
         1.0
@@ -186,20 +248,22 @@ pub fn psd_least_squares(
     };
     let t: Vec<f64> = diag_norms
         .iter()
-        .map(|&n| 1.0 / if n > 0.0 { n } else { fallback }.sqrt())
+        .map(|&nm| 1.0 / if nm > 0.0 { nm } else { fallback }.sqrt())
         .collect();
-    let tau: [f64; 6] = std::array::from_fn(|k| t[IJ[k].0] * t[IJ[k].1]);
+    let tau: Vec<f64> = ij.iter().map(|&(i, j)| t[i] * t[j]).collect();
     // Scaled normal equations: M̃ = D M D, ṽ = D v with D = diag(τ).
-    let ms: [[f64; 6]; 6] =
-        std::array::from_fn(|p| std::array::from_fn(|q| tau[p] * m[p][q] * tau[q]));
-    let vs: [f64; 6] = std::array::from_fn(|p| tau[p] * v[p]);
+    let ms: Vec<Vec<f64>> = (0..np)
+        .map(|p| (0..np).map(|q| tau[p] * m[p][q] * tau[q]).collect())
+        .collect();
+    let vs: Vec<f64> = (0..np).map(|p| tau[p] * v[p]).collect();
     let sigma = {
-        let tr: f64 = (0..6).map(|p| ms[p][p]).sum::<f64>() / 6.0;
+        let tr: f64 = (0..np).map(|p| ms[p][p]).sum::<f64>() / np as f64;
         if tr > 0.0 && tr.is_finite() { tr } else { 1.0 }
     };
     let bnorm = b.iter().map(|x| x * x).sum::<f64>().sqrt();
     // Magnitude of the unknown in scaled coordinates: ‖b‖/√σ (LS scale), or |d|/‖c̃‖.
-    let ceq = equality.map(|(c, d)| (std::array::from_fn::<f64, 6, _>(|k| c[k] * tau[k]), d));
+    let ceq: Option<(Vec<f64>, f64)> =
+        equality.map(|(c, d)| ((0..np).map(|k| c[k] * tau[k]).collect(), d));
     let rho = if bnorm > 0.0 {
         bnorm / sigma.sqrt()
     } else if let Some((cs, d)) = &ceq {
@@ -214,42 +278,40 @@ pub fn psd_least_squares(
     };
 
     // z = x̃ / ρ; objective (‖Ã ρ z − b‖² − ‖b‖²) / (ρ² σ) = zᵀ(M̃/σ)z − 2 (ṽ/(ρσ))ᵀz.
-    let mut colptr = Vec::with_capacity(7);
-    let mut rowval = Vec::with_capacity(21);
-    let mut nzval = Vec::with_capacity(21);
+    let mut colptr = Vec::with_capacity(np + 1);
+    let mut rowval = Vec::new();
+    let mut nzval = Vec::new();
     colptr.push(0);
-    for q in 0..6 {
+    for q in 0..np {
         for (p, row) in ms.iter().enumerate().take(q + 1) {
             rowval.push(p);
             nzval.push(2.0 * row[q] / sigma);
         }
         colptr.push(rowval.len());
     }
-    let p_mat = CscMatrix::new(6, 6, colptr, rowval, nzval);
+    let p_mat = CscMatrix::new(np, np, colptr, rowval, nzval);
     let q_vec: Vec<f64> = vs.iter().map(|x| -2.0 * x / (rho * sigma)).collect();
 
-    // Constraints A_c z + s = b_c: s = svec(Ľ) ∈ S³₊ → rows −svec map; equality row c̃.
+    // Constraints A_c z + s = b_c: s = svec(Ľ) ∈ Sⁿ₊ → rows −svec map; equality row c̃.
     let r2 = std::f64::consts::SQRT_2;
-    // svec position of each parameter and its factor.
-    const SVEC_POS: [usize; 6] = [0, 1, 3, 2, 4, 5];
-    let svec_fac = [1.0, r2, r2, 1.0, r2, 1.0];
-    let n_rows = if ceq.is_some() { 7 } else { 6 };
-    let mut trip_i = Vec::with_capacity(12);
-    let mut trip_j = Vec::with_capacity(12);
-    let mut trip_v = Vec::with_capacity(12);
-    for k in 0..6 {
-        trip_i.push(SVEC_POS[k]);
+    let n_rows = if ceq.is_some() { np + 1 } else { np };
+    let mut trip_i = Vec::with_capacity(np + 1);
+    let mut trip_j = Vec::with_capacity(np + 1);
+    let mut trip_v = Vec::with_capacity(np + 1);
+    for (k, &(i, j)) in ij.iter().enumerate() {
+        // svec position of (i, j), i ≤ j: upper triangle column by column.
+        trip_i.push(j * (j + 1) / 2 + i);
         trip_j.push(k);
-        trip_v.push(-svec_fac[k]);
+        trip_v.push(if i == j { -1.0 } else { -r2 });
     }
-    let mut b_c = vec![0.0; 6];
-    let mut cones: Vec<SupportedConeT<f64>> = vec![PSDTriangleConeT(3)];
+    let mut b_c = vec![0.0; np];
+    let mut cones: Vec<SupportedConeT<f64>> = vec![PSDTriangleConeT(n)];
     if let Some((cs, d)) = &ceq {
         let cn = cs.iter().map(|x| x * x).sum::<f64>().sqrt();
         let cn = if cn > 0.0 { cn } else { 1.0 };
         for (k, ck) in cs.iter().enumerate() {
             if *ck != 0.0 {
-                trip_i.push(6);
+                trip_i.push(np);
                 trip_j.push(k);
                 trip_v.push(ck / cn);
             }
@@ -257,7 +319,7 @@ pub fn psd_least_squares(
         b_c.push(d / (rho * cn));
         cones.push(ZeroConeT(1));
     }
-    let a_mat = CscMatrix::new_from_triplets(n_rows, 6, trip_i, trip_j, trip_v);
+    let a_mat = CscMatrix::new_from_triplets(n_rows, np, trip_i, trip_j, trip_v);
 
     let cl_settings = DefaultSettings {
         max_iter: settings.max_iter,
@@ -281,32 +343,46 @@ pub fn psd_least_squares(
         other => SdpStatus::Other(format!("{other:?}")),
     };
 
-    let mut l = [0.0f64; 6];
-    for k in 0..6 {
+    let mut l = DMatrix::<f64>::zeros(n, n);
+    for (k, &(i, j)) in ij.iter().enumerate() {
         let zk = sol.x.get(k).copied().unwrap_or(0.0);
-        l[k] = if zk.is_finite() {
+        let val = if zk.is_finite() {
             zk * rho * tau[k]
         } else {
             0.0
         };
+        l[(i, j)] = val;
+        l[(j, i)] = val;
     }
-    let l_mat = project_psd(&sym_from_params(&l));
-    let l = params_from_sym(&l_mat);
+    let l = project_psd_n(&l);
+    let lp: Vec<f64> = ij.iter().map(|&(i, j)| l[(i, j)]).collect();
     let objective: f64 = a
         .iter()
         .zip(b)
         .map(|(row, bi)| {
-            let r: f64 = row.iter().zip(&l).map(|(x, y)| x * y).sum::<f64>() - bi;
+            let r: f64 = row.iter().zip(&lp).map(|(x, y)| x * y).sum::<f64>() - bi;
             r * r
         })
         .sum();
-    Ok(PsdLsqSolution {
-        l: l_mat,
+    Ok(SymPsdSolution {
+        l,
         objective,
         status,
         iterations: sol.iterations,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// [`project_psd`] for an n×n matrix.
+pub fn project_psd_n(m: &DMatrix<f64>) -> DMatrix<f64> {
+    let sym = (m + m.transpose()) * 0.5;
+    let eig = sym.clone().symmetric_eigen();
+    if eig.eigenvalues.iter().all(|&x| x >= 0.0) {
+        return sym;
+    }
+    let clamped = eig.eigenvalues.map(|x| x.max(0.0));
+    let p = &eig.eigenvectors * DMatrix::from_diagonal(&clamped) * eig.eigenvectors.transpose();
+    (&p + p.transpose()) * 0.5
 }
 
 /// Projection onto the PSD cone in the Frobenius norm (negative eigenvalues set to zero);
@@ -323,9 +399,10 @@ pub fn project_psd(m: &Matrix3<f64>) -> Matrix3<f64> {
 }
 
 fn validate(
-    a: &[[f64; 6]],
+    np: usize,
+    a: &[Vec<f64>],
     b: &[f64],
-    equality: Option<&([f64; 6], f64)>,
+    equality: Option<(&[f64], f64)>,
     settings: &SdpSettings,
 ) -> Result<()> {
     if a.is_empty() {
@@ -340,6 +417,22 @@ fn validate(
             context: "psd_least_squares: rows of A vs length of b",
             expected: a.len().to_string(),
             got: b.len().to_string(),
+        });
+    }
+    if let Some(r) = a.iter().position(|row| row.len() != np) {
+        return Err(Error::Dimension {
+            context: "psd_least_squares: length of a row of A",
+            expected: np.to_string(),
+            got: a[r].len().to_string(),
+        });
+    }
+    if let Some((c, _)) = equality
+        && c.len() != np
+    {
+        return Err(Error::Dimension {
+            context: "psd_least_squares: length of the equality row",
+            expected: np.to_string(),
+            got: c.len().to_string(),
         });
     }
     if let Some(r) = a.iter().position(|row| row.iter().any(|x| !x.is_finite())) {

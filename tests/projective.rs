@@ -188,21 +188,6 @@ fn too_small_or_degenerate_input_is_a_typed_error() {
     }
 }
 
-#[test]
-fn the_euclidean_perspective_model_is_refused_with_a_clear_error() {
-    let s = scene(3.0, 0.0, 0.0, 9);
-    let cfg = Config {
-        camera: CameraModel::Perspective,
-        ..Config::default()
-    };
-    match Reconstruction::from_tracks(&s.table, &cfg) {
-        Err(Error::InvalidConfig {
-            field: "camera", ..
-        }) => {}
-        other => panic!("expected InvalidConfig(camera), got {other:?}"),
-    }
-}
-
 /// The best known projective optima (ECCV 2016, Table 7) from the default pipeline.
 #[test]
 fn real_benchmarks_reach_the_known_projective_optima() {

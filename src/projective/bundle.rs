@@ -97,15 +97,22 @@ pub trait BundleModel: Sync {
     fn pt_dim(&self) -> usize;
     /// Residuals per observation.
     fn res_dim(&self) -> usize;
+    /// Parameters shared by every observation (e.g. one focal length for all frames),
+    /// Euclidean. Default 0.
+    fn glob_len(&self) -> usize {
+        0
+    }
     /// Residual `r` (length `res_dim`) of an observation `w`, and optionally the Jacobians
-    /// `(∂r/∂cam: res_dim × cam_len, ∂r/∂pt: res_dim × pt_len)`.
+    /// (`∂r/∂cam`: res_dim × cam_len, `∂r/∂pt`: res_dim × pt_len, `∂r/∂glob`: res_dim ×
+    /// glob_len, all row-major).
     fn eval(
         &self,
         cam: &[f64],
         pt: &[f64],
+        glob: &[f64],
         w: [f64; 2],
         r: &mut [f64],
-        jac: Option<(&mut [f64], &mut [f64])>,
+        jac: Option<Jacobians<'_>>,
     );
     /// Tangent basis at a camera (`cam_len × cam_dim`, row-major) into `out`; returns false
     /// when the parameters are Euclidean (basis = identity; `out` untouched).
@@ -125,9 +132,19 @@ pub trait BundleModel: Sync {
     /// data's (the mean diagonal of the camera blocks). Removing the exact null space lets
     /// the damping go to zero, which the soft (non-gauge) modes of a long sequence need.
     /// Default: none.
-    fn gauge_pins(&self, _cams: &[f64], _n_cams: usize) -> Vec<(usize, Vec<[f64; 12]>)> {
+    fn gauge_pins(&self, _cams: &[f64], _n_cams: usize) -> Vec<(usize, Vec<Vec<f64>>)> {
         Vec::new()
     }
+}
+
+/// The Jacobians [`BundleModel::eval`] fills (row-major, stored-parameter space).
+pub struct Jacobians<'a> {
+    /// `∂r/∂cam`, res_dim × cam_len.
+    pub cam: &'a mut [f64],
+    /// `∂r/∂pt`, res_dim × pt_len.
+    pub pt: &'a mut [f64],
+    /// `∂r/∂glob`, res_dim × glob_len (empty when the model has no shared parameters).
+    pub glob: &'a mut [f64],
 }
 
 /// Orthonormal basis of the tangent space of the unit sphere at `v` (`n × (n−1)`,
@@ -269,7 +286,7 @@ struct Pattern {
 }
 
 impl Pattern {
-    fn new(g: &Graph, c: usize) -> Result<Self, String> {
+    fn new(g: &Graph, c: usize, k: usize) -> Result<Self, String> {
         let (cptr, cpts) = g.by_camera();
         let mut mark = vec![usize::MAX; g.n_cams];
         let mut nbrs = vec![Vec::new(); g.n_cams];
@@ -285,7 +302,7 @@ impl Pattern {
             }
             nbrs[cam].sort_unstable();
         }
-        let n = g.n_cams * c;
+        let n = g.n_cams * c + k;
         let mut col_ptr = Vec::with_capacity(n + 1);
         let mut row_idx = Vec::new();
         col_ptr.push(0);
@@ -299,8 +316,17 @@ impl Pattern {
                         row_idx.push(f * c + r);
                     }
                 }
+                for r in 0..k {
+                    row_idx.push(g.n_cams * c + r);
+                }
                 col_ptr.push(row_idx.len());
             }
+        }
+        for col in 0..k {
+            for r in col..k {
+                row_idx.push(g.n_cams * c + r);
+            }
+            col_ptr.push(row_idx.len());
         }
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr.clone(), None, row_idx);
         let llt = SymbolicLlt::try_new(symbolic.as_ref(), Side::Lower)
@@ -346,6 +372,19 @@ impl Pattern {
         }
     }
 
+    /// Value index of the shared-unknown row `r` in column `col` of camera `g`.
+    #[inline]
+    fn glob_in_cam(&self, g: usize, col: usize, r: usize) -> usize {
+        let c = self.c;
+        self.col_ptr[g * c + col] + (c - col) + self.nbrs[g].len() * c + r
+    }
+
+    /// Value index of entry `(r, col)`, `r ≥ col`, of the shared-unknown block.
+    #[inline]
+    fn glob(&self, n_cams: usize, r: usize, col: usize) -> usize {
+        self.col_ptr[n_cams * self.c + col] + r - col
+    }
+
     fn nnz(&self) -> usize {
         *self.col_ptr.last().unwrap_or(&0)
     }
@@ -363,7 +402,7 @@ pub struct LmResult {
 
 /// Cost `Σ ‖r‖²` of the current parameters (per-track sums in parallel, added in track
 /// order so that the result does not depend on the thread schedule).
-pub fn cost<M: BundleModel>(model: &M, g: &Graph, cams: &[f64], pts: &[f64]) -> f64 {
+pub fn cost<M: BundleModel>(model: &M, g: &Graph, cams: &[f64], pts: &[f64], glob: &[f64]) -> f64 {
     let (cl, pl, m) = (model.cam_len(), model.pt_len(), model.res_dim());
     (0..g.n_pts)
         .into_par_iter()
@@ -373,7 +412,7 @@ pub fn cost<M: BundleModel>(model: &M, g: &Graph, cams: &[f64], pts: &[f64]) -> 
             let mut s = 0.0;
             for o in g.track(p) {
                 let f = g.cam[o];
-                model.eval(&cams[f * cl..(f + 1) * cl], x, g.w[o], &mut r, None);
+                model.eval(&cams[f * cl..(f + 1) * cl], x, glob, g.w[o], &mut r, None);
                 s += r.iter().map(|v| v * v).sum::<f64>();
             }
             s
@@ -384,13 +423,20 @@ pub fn cost<M: BundleModel>(model: &M, g: &Graph, cams: &[f64], pts: &[f64]) -> 
 }
 
 /// Per-track cost `Σ_f ‖r‖²` of track `p`.
-pub fn track_cost<M: BundleModel>(model: &M, g: &Graph, cams: &[f64], x: &[f64], p: usize) -> f64 {
+pub fn track_cost<M: BundleModel>(
+    model: &M,
+    g: &Graph,
+    cams: &[f64],
+    glob: &[f64],
+    x: &[f64],
+    p: usize,
+) -> f64 {
     let cl = model.cam_len();
     let mut r = vec![0.0; model.res_dim()];
     let mut s = 0.0;
     for o in g.track(p) {
         let f = g.cam[o];
-        model.eval(&cams[f * cl..(f + 1) * cl], x, g.w[o], &mut r, None);
+        model.eval(&cams[f * cl..(f + 1) * cl], x, glob, g.w[o], &mut r, None);
         s += r.iter().map(|v| v * v).sum::<f64>();
     }
     s
@@ -403,13 +449,14 @@ pub fn solve_points<M: BundleModel>(
     model: &M,
     g: &Graph,
     cams: &[f64],
+    glob: &[f64],
     pts: &mut [f64],
     iterations: usize,
 ) -> f64 {
     let pl = model.pt_len();
     pts.par_chunks_mut(pl)
         .enumerate()
-        .map(|(p, x)| solve_point(model, g, cams, x, p, iterations))
+        .map(|(p, x)| solve_point(model, g, cams, glob, x, p, iterations))
         .collect::<Vec<_>>()
         .iter()
         .sum()
@@ -420,6 +467,7 @@ fn solve_point<M: BundleModel>(
     model: &M,
     g: &Graph,
     cams: &[f64],
+    glob: &[f64],
     x: &mut [f64],
     p: usize,
     iterations: usize,
@@ -433,9 +481,10 @@ fn solve_point<M: BundleModel>(
     let mut r = vec![0.0; m];
     let mut jc = vec![0.0; m * cl];
     let mut jp = vec![0.0; m * pl];
+    let mut jg = vec![0.0; m * model.glob_len()];
     let mut basis = vec![0.0; pl * pd];
     let mut jt = vec![0.0; m * pd];
-    let mut cost = track_cost(model, g, cams, x, p);
+    let mut cost = track_cost(model, g, cams, glob, x, p);
     let mut lambda = 1e-6;
     let mut trial = x.to_vec();
     let mut it = 0;
@@ -449,9 +498,14 @@ fn solve_point<M: BundleModel>(
             model.eval(
                 &cams[f * cl..(f + 1) * cl],
                 x,
+                glob,
                 g.w[o],
                 &mut r,
-                Some((&mut jc, &mut jp)),
+                Some(Jacobians {
+                    cam: &mut jc,
+                    pt: &mut jp,
+                    glob: &mut jg,
+                }),
             );
             tangent(&jp, &basis, has_basis, m, pl, pd, &mut jt);
             for i in 0..m {
@@ -487,7 +541,7 @@ fn solve_point<M: BundleModel>(
             trial.copy_from_slice(x);
             apply(&mut trial, &d, &basis, has_basis, pl, pd);
             model.normalize_pt(&mut trial);
-            let c2 = track_cost(model, g, cams, &trial, p);
+            let c2 = track_cost(model, g, cams, glob, &trial, p);
             if c2 <= cost {
                 let rel = (cost - c2) / cost.max(f64::MIN_POSITIVE);
                 x.copy_from_slice(&trial);
@@ -556,6 +610,11 @@ fn apply(v: &mut [f64], delta: &[f64], basis: &[f64], has_basis: bool, n: usize,
 struct TrackLin {
     v: Vec<f64>,
     gp: Vec<f64>,
+    /// `Σ J_gᵀ J_x` over the track's observations (glob_len × pt_dim).
+    wg: Vec<f64>,
+    /// The track's share of `J_gᵀ J_g` (lower triangle) and of `J_gᵀ r`.
+    ugg: Vec<f64>,
+    gg: Vec<f64>,
 }
 
 /// Minimises `Σ ‖r‖²` over cameras and points from the given start (updated in place).
@@ -586,7 +645,31 @@ pub fn minimize_fixed<M: BundleModel>(
     cfg: &LmConfig,
     progress: &mut Progress<'_>,
 ) -> Result<LmResult, String> {
+    minimize_shared(model, g, cams, pts, &mut [], fixed, cfg, progress)
+}
+
+/// [`minimize_fixed`] for a model with shared parameters ([`BundleModel::glob_len`] of
+/// them, in `glob`, updated in place): they are unknowns of the reduced system ordered
+/// after the cameras, coupled to every camera (`O(F · glob_len)` more non-zeros in `S`).
+#[allow(clippy::too_many_arguments)]
+pub fn minimize_shared<M: BundleModel>(
+    model: &M,
+    g: &Graph,
+    cams: &mut [f64],
+    pts: &mut [f64],
+    glob: &mut [f64],
+    fixed: &[bool],
+    cfg: &LmConfig,
+    progress: &mut Progress<'_>,
+) -> Result<LmResult, String> {
     let start = Instant::now();
+    let k = model.glob_len();
+    if glob.len() != k {
+        return Err(format!(
+            "{} shared parameters given, the model has {k}",
+            glob.len()
+        ));
+    }
     let is_fixed = |f: usize| fixed.get(f).copied().unwrap_or(false);
     let (cl, cd, pl, pd, m) = (
         model.cam_len(),
@@ -596,14 +679,15 @@ pub fn minimize_fixed<M: BundleModel>(
         model.res_dim(),
     );
     let (nf, np, nobs) = (g.n_cams, g.n_pts, g.n_obs());
-    let pattern = Pattern::new(g, cd)?;
+    let pattern = Pattern::new(g, cd, k)?;
+    let ns = nf * cd + k;
     let n_res = (nobs * m).max(1) as f64;
     let rms = |c: f64| (c / n_res).sqrt() * progress.rms_scale;
 
     if cfg.resolve_points {
-        solve_points(model, g, cams, pts, cfg.point_iterations);
+        solve_points(model, g, cams, glob, pts, cfg.point_iterations);
     }
-    let mut cur = cost(model, g, cams, pts);
+    let mut cur = cost(model, g, cams, pts, glob);
     let initial_cost = cur;
     let mut costs = vec![cur];
     progress.observer.on_event(&Event::Iteration {
@@ -622,7 +706,8 @@ pub fn minimize_fixed<M: BundleModel>(
     // Buffers reused across iterations: W blocks (cd × pd per observation), camera
     // blocks U (cd × cd), gradients.
     // Per observation: W = J_cᵀ J_x (cd × pd), J_c in the tangent space (m × cd), r (m).
-    let stride = cd * pd + m * cd + m;
+    // And J_g (m × k) when the model has shared parameters.
+    let stride = cd * pd + m * cd + m + m * k;
     let mut lin = vec![0.0; nobs * stride];
     // Observations by camera (for the camera blocks, in parallel over cameras).
     let (cam_ptr, cam_obs) = {
@@ -646,8 +731,12 @@ pub fn minimize_fixed<M: BundleModel>(
     let mut cam_basis = vec![0.0; nf * cl * cd];
     let mut cam_has_basis = vec![false; nf];
     let mut values = vec![0.0; pattern.nnz()];
+    // At least one slot per camera so that the per-camera zip below visits every camera.
+    let kc = (k * cd).max(1);
+    let mut ugf = vec![0.0; nf * kc];
     let mut trial_cams = cams.to_vec();
     let mut trial_pts = pts.to_vec();
+    let mut trial_glob = glob.to_vec();
     if cur <= cfg.absolute_tolerance * n_res {
         status = SolverStatus::Converged;
     }
@@ -682,18 +771,27 @@ pub fn minimize_fixed<M: BundleModel>(
                 let mut jpt = vec![0.0; m * pd];
                 let mut v = vec![0.0; pd * pd];
                 let mut gp = vec![0.0; pd];
+                let mut wg = vec![0.0; k * pd];
+                let mut ugg = vec![0.0; k * k];
+                let mut gg = vec![0.0; k];
                 for (i, o) in g.track(p).enumerate() {
                     let f = g.cam[o];
+                    let blk = &mut out[i * stride..(i + 1) * stride];
+                    let (wb, rest) = blk.split_at_mut(cd * pd);
+                    let (jct, rest) = rest.split_at_mut(m * cd);
+                    let (rb, jg) = rest.split_at_mut(m);
                     model.eval(
                         &cams[f * cl..(f + 1) * cl],
                         x,
+                        glob,
                         g.w[o],
                         &mut r,
-                        Some((&mut jc, &mut jp)),
+                        Some(Jacobians {
+                            cam: &mut jc,
+                            pt: &mut jp,
+                            glob: jg,
+                        }),
                     );
-                    let blk = &mut out[i * stride..(i + 1) * stride];
-                    let (wb, rest) = blk.split_at_mut(cd * pd);
-                    let (jct, rb) = rest.split_at_mut(m * cd);
                     tangent(
                         &jc,
                         &cam_basis[f * cl * cd..(f + 1) * cl * cd],
@@ -721,6 +819,16 @@ pub fn minimize_fixed<M: BundleModel>(
                                 v[d1 * pd + d2] += b[d1] * b[d2];
                             }
                         }
+                        let jgr = &jg[row * k..(row + 1) * k];
+                        for k1 in 0..k {
+                            gg[k1] += jgr[k1] * e;
+                            for d in 0..pd {
+                                wg[k1 * pd + d] += jgr[k1] * b[d];
+                            }
+                            for k2 in 0..=k1 {
+                                ugg[k1 * k + k2] += jgr[k1] * jgr[k2];
+                            }
+                        }
                     }
                 }
                 for d1 in 0..pd {
@@ -728,19 +836,23 @@ pub fn minimize_fixed<M: BundleModel>(
                         v[d2 * pd + d1] = v[d1 * pd + d2];
                     }
                 }
-                TrackLin { v, gp }
+                TrackLin { v, gp, wg, ugg, gg }
             })
             .collect();
-        // Per camera (in parallel): U_f = Σ J_cᵀ J_c (lower triangle), g_f = Σ J_cᵀ r.
+        // Per camera (in parallel): U_f = Σ J_cᵀ J_c (lower triangle), g_f = Σ J_cᵀ r,
+        // and the coupling to the shared parameters U_gf = Σ J_gᵀ J_c.
         u.par_chunks_mut(cd * cd)
             .zip(gc.par_chunks_mut(cd))
+            .zip(ugf.par_chunks_mut(kc))
             .enumerate()
-            .for_each(|(f, (uf, gf))| {
+            .for_each(|(f, ((uf, gf), ug))| {
                 uf.iter_mut().for_each(|x| *x = 0.0);
                 gf.iter_mut().for_each(|x| *x = 0.0);
+                ug.iter_mut().for_each(|x| *x = 0.0);
                 for &o in &cam_obs[cam_ptr[f]..cam_ptr[f + 1]] {
                     let blk = &lin[o * stride + cd * pd..(o + 1) * stride];
-                    let (jct, rb) = blk.split_at(m * cd);
+                    let (jct, rest) = blk.split_at(m * cd);
+                    let (rb, jg) = rest.split_at(m);
                     for row in 0..m {
                         let a = &jct[row * cd..(row + 1) * cd];
                         for c1 in 0..cd {
@@ -749,9 +861,26 @@ pub fn minimize_fixed<M: BundleModel>(
                                 uf[c1 * cd + c2] += a[c1] * a[c2];
                             }
                         }
+                        for k1 in 0..k {
+                            let jv = jg[row * k + k1];
+                            for c1 in 0..cd {
+                                ug[k1 * cd + c1] += jv * a[c1];
+                            }
+                        }
                     }
                 }
             });
+        // Shared parameters: U_gg and g_g, summed in track order (deterministic).
+        let mut ugg = vec![0.0; k * k];
+        let mut gglob = vec![0.0; k];
+        for l in &lins {
+            for i in 0..k * k {
+                ugg[i] += l.ugg[i];
+            }
+            for i in 0..k {
+                gglob[i] += l.gg[i];
+            }
+        }
         let mean_diag_u = (0..nf * cd)
             .map(|i| u[(i / cd) * cd * cd + (i % cd) * cd + i % cd])
             .sum::<f64>()
@@ -763,7 +892,7 @@ pub fn minimize_fixed<M: BundleModel>(
             .into_iter()
             .map(|(f, dirs)| {
                 let b = &cam_basis[f * cl * cd..(f + 1) * cl * cd];
-                let mut k = vec![0.0; cd * cd];
+                let mut kf = vec![0.0; cd * cd];
                 for v in dirs {
                     let a: Vec<f64> = if cam_has_basis[f] {
                         (0..cd)
@@ -776,16 +905,17 @@ pub fn minimize_fixed<M: BundleModel>(
                     if n2 > 1e-12 {
                         for c1 in 0..cd {
                             for c2 in 0..cd {
-                                k[c1 * cd + c2] += mean_diag_u * a[c1] * a[c2] / n2;
+                                kf[c1 * cd + c2] += mean_diag_u * a[c1] * a[c2] / n2;
                             }
                         }
                     }
                 }
-                (f, k)
+                (f, kf)
             })
             .collect();
         let gnorm_inf = gc
             .iter()
+            .chain(gglob.iter())
             .chain(lins.iter().flat_map(|l| l.gp.iter()))
             .fold(0.0f64, |a, &b| a.max(b.abs()));
         if gnorm_inf == 0.0 {
@@ -822,8 +952,21 @@ pub fn minimize_fixed<M: BundleModel>(
                 .collect();
             // Reduced camera system.
             values.iter_mut().for_each(|x| *x = 0.0);
-            let mut rhs = Mat::<f64>::zeros(nf * cd, 1);
+            let mut rhs = Mat::<f64>::zeros(ns, 1);
             let mut dcam = vec![0.0; nf * cd];
+            let mut dglob = vec![0.0; k];
+            for k1 in 0..k {
+                for k2 in 0..=k1 {
+                    let mut v = ugg[k1 * k + k2];
+                    if k1 == k2 {
+                        let dd = v.max(dfloor);
+                        dglob[k1] = dd;
+                        v += lambda * dd;
+                    }
+                    values[pattern.glob(nf, k1, k2)] += v;
+                }
+                rhs[(nf * cd + k1, 0)] = -gglob[k1];
+            }
             for f in 0..nf {
                 let uf = &u[f * cd * cd..(f + 1) * cd * cd];
                 for c1 in 0..cd {
@@ -837,12 +980,15 @@ pub fn minimize_fixed<M: BundleModel>(
                         values[pattern.pos(f, f, c1, c2)] += v;
                     }
                     rhs[(f * cd + c1, 0)] = -gc[f * cd + c1];
+                    for k1 in 0..k {
+                        values[pattern.glob_in_cam(f, c1, k1)] += ugf[f * kc + k1 * cd + c1];
+                    }
                 }
             }
-            for (f, k) in &pins {
+            for (f, kf) in &pins {
                 for c1 in 0..cd {
                     for c2 in 0..=c1 {
-                        values[pattern.pos(*f, *f, c1, c2)] += k[c1 * cd + c2];
+                        values[pattern.pos(*f, *f, c1, c2)] += kf[c1 * cd + c2];
                     }
                 }
             }
@@ -854,12 +1000,39 @@ pub fn minimize_fixed<M: BundleModel>(
             }
             let mut y = vec![0.0; cd * pd];
             let mut ys: Vec<f64> = Vec::new();
+            let mut yg = vec![0.0; k * pd];
             for p in 0..np {
                 let range = g.track(p);
-                let k = range.len();
-                ys.resize(k * cd * pd, 0.0);
+                ys.resize(range.len() * cd * pd, 0.0);
                 let vi = &vinv[p];
                 let gp = &lins[p].gp;
+                if k > 0 {
+                    // Shared rows: Y_g = W_g V⁻¹; S_gg −= Y_g W_gᵀ, S_gf −= Y_g W_fᵀ.
+                    let wg = &lins[p].wg;
+                    for k1 in 0..k {
+                        for d2 in 0..pd {
+                            yg[k1 * pd + d2] =
+                                (0..pd).map(|d1| wg[k1 * pd + d1] * vi[d1 * pd + d2]).sum();
+                        }
+                        let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * gp[d]).sum();
+                        rhs[(nf * cd + k1, 0)] += s;
+                        for k2 in 0..=k1 {
+                            let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * wg[k2 * pd + d]).sum();
+                            values[pattern.glob(nf, k1, k2)] -= s;
+                        }
+                    }
+                    for o in range.clone() {
+                        let f = g.cam[o];
+                        let wb = &lin[o * stride..o * stride + cd * pd];
+                        for c1 in 0..cd {
+                            for k1 in 0..k {
+                                let s: f64 =
+                                    (0..pd).map(|d| yg[k1 * pd + d] * wb[c1 * pd + d]).sum();
+                                values[pattern.glob_in_cam(f, c1, k1)] -= s;
+                            }
+                        }
+                    }
+                }
                 for (i, o) in range.clone().enumerate() {
                     let wb = &lin[o * stride..o * stride + cd * pd];
                     for c1 in 0..cd {
@@ -919,7 +1092,8 @@ pub fn minimize_fixed<M: BundleModel>(
             let dc: Vec<f64> = (0..nf * cd)
                 .map(|i| if is_fixed(i / cd) { 0.0 } else { rhs[(i, 0)] })
                 .collect();
-            if dc.iter().any(|v| !v.is_finite()) {
+            let dg: Vec<f64> = (0..k).map(|i| rhs[(nf * cd + i, 0)]).collect();
+            if dc.iter().chain(dg.iter()).any(|v| !v.is_finite()) {
                 lambda *= nu;
                 nu *= 2.0;
                 continue;
@@ -939,6 +1113,12 @@ pub fn minimize_fixed<M: BundleModel>(
                             }
                         }
                     }
+                    let wg = &lins[p].wg;
+                    for k1 in 0..k {
+                        for d in 0..pd {
+                            b[d] -= wg[k1 * pd + d] * dg[k1];
+                        }
+                    }
                     let vi = &vinv[p];
                     (0..pd).map(move |d1| (0..pd).map(|d2| vi[d1 * pd + d2] * b[d2]).sum::<f64>())
                 })
@@ -949,11 +1129,14 @@ pub fn minimize_fixed<M: BundleModel>(
             for i in 0..nf * cd {
                 pred += -gc[i] * dc[i] + lambda * dcam[i] * dc[i] * dc[i];
             }
-            for (f, k) in &pins {
+            for i in 0..k {
+                pred += -gglob[i] * dg[i] + lambda * dglob[i] * dg[i] * dg[i];
+            }
+            for (f, kf) in &pins {
                 let d = &dc[f * cd..(f + 1) * cd];
                 for c1 in 0..cd {
                     for c2 in 0..cd {
-                        pred += d[c1] * k[c1 * cd + c2] * d[c2];
+                        pred += d[c1] * kf[c1 * cd + c2] * d[c2];
                     }
                 }
             }
@@ -969,8 +1152,12 @@ pub fn minimize_fixed<M: BundleModel>(
             // Trial parameters.
             trial_cams.copy_from_slice(cams);
             trial_pts.copy_from_slice(pts);
-            let mut step2 = 0.0;
-            let mut par2 = 0.0;
+            trial_glob.copy_from_slice(glob);
+            let mut step2 = dg.iter().map(|v| v * v).sum::<f64>();
+            let mut par2 = glob.iter().map(|v| v * v).sum::<f64>();
+            for i in 0..k {
+                trial_glob[i] += dg[i];
+            }
             for f in 0..nf {
                 let c = &mut trial_cams[f * cl..(f + 1) * cl];
                 par2 += c.iter().map(|v| v * v).sum::<f64>();
@@ -997,15 +1184,23 @@ pub fn minimize_fixed<M: BundleModel>(
                 model.normalize_pt(x);
             }
             let new_cost = if cfg.resolve_points {
-                solve_points(model, g, &trial_cams, &mut trial_pts, cfg.point_iterations)
+                solve_points(
+                    model,
+                    g,
+                    &trial_cams,
+                    &trial_glob,
+                    &mut trial_pts,
+                    cfg.point_iterations,
+                )
             } else {
-                cost(model, g, &trial_cams, &trial_pts)
+                cost(model, g, &trial_cams, &trial_pts, &trial_glob)
             };
             let rho = (cur - new_cost) / pred.max(f64::MIN_POSITIVE);
             if new_cost.is_finite() && new_cost < cur {
                 let rel = (cur - new_cost) / cur;
                 cams.copy_from_slice(&trial_cams);
                 pts.copy_from_slice(&trial_pts);
+                glob.copy_from_slice(&trial_glob);
                 cur = new_cost;
                 costs.push(cur);
                 if rho > 0.25 {

@@ -230,7 +230,7 @@ impl ProjectiveModel {
             let x = dlt_point(&g, &cams, p);
             pts[4 * p..4 * p + 4].copy_from_slice(&x);
         }
-        bundle::solve_points(&models::Projective, &g, &cams, &mut pts, 20);
+        bundle::solve_points(&models::Projective, &g, &cams, &[], &mut pts, 20);
         (0..meas.n_points())
             .map(|p| {
                 if g.track(p).len() < 2 {
@@ -354,7 +354,7 @@ impl Normalization {
 }
 
 /// The observations of `meas` in normalized coordinates, by track.
-fn graph(meas: &Measurements, norm: &Normalization) -> Graph {
+pub(crate) fn graph(meas: &Measurements, norm: &Normalization) -> Graph {
     let (nf, np) = (meas.n_frames(), meas.n_points());
     let mut pt_ptr = Vec::with_capacity(np + 1);
     let mut cam = Vec::new();
@@ -473,7 +473,7 @@ pub fn fit(
         let st = sturm_triggs::run(&g, cfg.sturm_triggs_iterations)?;
         let mut c = st.cameras;
         let mut x = st.points;
-        let before = (bundle::cost(&models::Projective, &g, &c, &x) / n_scalars).sqrt() * px;
+        let before = (bundle::cost(&models::Projective, &g, &c, &x, &[]) / n_scalars).sqrt() * px;
         for v in c.chunks_mut(12) {
             bundle::normalize(v);
         }
@@ -530,6 +530,7 @@ fn bridge(
                 g,
                 &mut c,
                 &mut x,
+                &mut [],
                 &cfg.pose,
                 run,
                 observer,
@@ -829,6 +830,7 @@ fn bundle_adjust(
         g,
         &mut cams,
         &mut pts,
+        &mut [],
         &cfg.refine,
         run,
         observer,
@@ -849,22 +851,23 @@ fn bundle_adjust(
 /// One solver stage of the chain: its events, its run of [`bundle::minimize`] and its
 /// [`StageReport`] (RMS before and after: `rms_scale` × `sqrt(cost / #observed scalars)`,
 /// `rms_scale` = pixels per normalized unit).
-struct Stage {
+pub(crate) struct Stage {
     /// Stage and solver name in events and reports.
-    name: &'static str,
+    pub name: &'static str,
     /// Stage name in a numerical error.
-    what: &'static str,
-    rms_scale: f64,
+    pub what: &'static str,
+    pub rms_scale: f64,
 }
 
 impl Stage {
     #[allow(clippy::too_many_arguments)]
-    fn run<M: bundle::BundleModel>(
+    pub fn run<M: bundle::BundleModel>(
         &self,
         model: &M,
         g: &Graph,
         cams: &mut [f64],
         pts: &mut [f64],
+        glob: &mut [f64],
         cfg: &LmConfig,
         run: usize,
         observer: &mut dyn Observer,
@@ -874,12 +877,14 @@ impl Stage {
         let rms = |cost: f64| (cost / n_scalars).sqrt() * self.rms_scale;
         let t0 = Instant::now();
         observer.on_event(&Event::StageStarted { stage: self.name });
-        let before = rms(bundle::cost(model, g, cams, pts));
-        let r = bundle::minimize(
+        let before = rms(bundle::cost(model, g, cams, pts, glob));
+        let r = bundle::minimize_shared(
             model,
             g,
             cams,
             pts,
+            glob,
+            &[],
             cfg,
             &mut Progress {
                 observer: &mut *observer,

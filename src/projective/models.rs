@@ -1,6 +1,6 @@
 //! The residual models of the projective stages, for the sparse engine in [`super::bundle`].
 
-use super::bundle::{BundleModel, normalize, sphere_basis};
+use super::bundle::{BundleModel, Jacobians, normalize, sphere_basis};
 
 /// Projective reprojection error: `r = π(P X) − w`, `π(a, b, c) = (a/c, b/c)`, with
 /// `P ∈ R¹²` (row-major 3×4) and `X ∈ R⁴` both on their unit spheres (their scales are
@@ -30,9 +30,10 @@ impl BundleModel for Projective {
         &self,
         p: &[f64],
         x: &[f64],
+        _glob: &[f64],
         w: [f64; 2],
         r: &mut [f64],
-        jac: Option<(&mut [f64], &mut [f64])>,
+        jac: Option<Jacobians<'_>>,
     ) {
         let a = p[0] * x[0] + p[1] * x[1] + p[2] * x[2] + p[3] * x[3];
         let b = p[4] * x[0] + p[5] * x[1] + p[6] * x[2] + p[7] * x[3];
@@ -41,7 +42,10 @@ impl BundleModel for Projective {
         let (u, v) = (a * ic, b * ic);
         r[0] = u - w[0];
         r[1] = v - w[1];
-        if let Some((jc, jp)) = jac {
+        if let Some(Jacobians {
+            cam: jc, pt: jp, ..
+        }) = jac
+        {
             for k in 0..4 {
                 // ∂u/∂P1 = X/c, ∂u/∂P3 = −u X/c; ∂v/∂P2 = X/c, ∂v/∂P3 = −v X/c.
                 jc[k] = x[k] * ic;
@@ -76,19 +80,19 @@ impl BundleModel for Projective {
     /// 0 (its orbit `P_0 E` spans all of its tangent space), and for camera 1 the
     /// transformations that leave camera 0 fixed, `E = c₀ vᵀ` with `c₀` camera 0's centre
     /// (`P_0 c₀ = 0`): the directions `(P_1 c₀) e_kᵀ`, `k = 1..4`.
-    fn gauge_pins(&self, cams: &[f64], n_cams: usize) -> Vec<(usize, Vec<[f64; 12]>)> {
+    fn gauge_pins(&self, cams: &[f64], n_cams: usize) -> Vec<(usize, Vec<Vec<f64>>)> {
         if n_cams < 2 {
             return Vec::new();
         }
-        let all: Vec<[f64; 12]> = (0..12)
-            .map(|i| std::array::from_fn(|j| if i == j { 1.0 } else { 0.0 }))
+        let all: Vec<Vec<f64>> = (0..12)
+            .map(|i| (0..12).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
             .collect();
         let c0 = centre(&cams[..12]);
         let p1 = &cams[12..24];
         let e: [f64; 3] = std::array::from_fn(|r| (0..4).map(|k| p1[4 * r + k] * c0[k]).sum());
         let dirs = (0..4)
             .map(|k| {
-                let mut v = [0.0; 12];
+                let mut v = vec![0.0; 12];
                 for r in 0..3 {
                     v[4 * r + k] = e[r];
                 }
@@ -151,9 +155,10 @@ impl BundleModel for Pose {
         &self,
         p: &[f64],
         x: &[f64],
+        _glob: &[f64],
         w: [f64; 2],
         r: &mut [f64],
-        jac: Option<(&mut [f64], &mut [f64])>,
+        jac: Option<Jacobians<'_>>,
     ) {
         let (so, sa) = ((1.0 - self.eta).sqrt(), self.eta.sqrt());
         let a = p[0] * x[0] + p[1] * x[1] + p[2] * x[2] + p[3];
@@ -163,7 +168,10 @@ impl BundleModel for Pose {
         r[1] = so * (b - w[1] * c);
         r[2] = sa * (a - w[0]);
         r[3] = sa * (b - w[1]);
-        if let Some((jc, jp)) = jac {
+        if let Some(Jacobians {
+            cam: jc, pt: jp, ..
+        }) = jac
+        {
             jc.iter_mut().for_each(|v| *v = 0.0);
             for k in 0..4 {
                 let xk = if k < 3 { x[k] } else { 1.0 };
@@ -194,7 +202,18 @@ mod tests {
         let mut r = vec![0.0; k];
         let mut jc = vec![0.0; k * cl];
         let mut jp = vec![0.0; k * pl];
-        m.eval(cam, pt, w, &mut r, Some((&mut jc, &mut jp)));
+        m.eval(
+            cam,
+            pt,
+            &[],
+            w,
+            &mut r,
+            Some(Jacobians {
+                cam: &mut jc,
+                pt: &mut jp,
+                glob: &mut [],
+            }),
+        );
         let h = 1e-6;
         for (len, is_cam) in [(cl, true), (pl, false)] {
             for j in 0..len {
@@ -208,8 +227,8 @@ mod tests {
                     p2[j] -= h;
                 }
                 let (mut r1, mut r2) = (vec![0.0; k], vec![0.0; k]);
-                m.eval(&c1, &p1, w, &mut r1, None);
-                m.eval(&c2, &p2, w, &mut r2, None);
+                m.eval(&c1, &p1, &[], w, &mut r1, None);
+                m.eval(&c2, &p2, &[], w, &mut r2, None);
                 for i in 0..k {
                     let fd = (r1[i] - r2[i]) / (2.0 * h);
                     let an = if is_cam {

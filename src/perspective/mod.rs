@@ -1,0 +1,546 @@
+//! The metric perspective camera: Euclidean upgrade of a projective reconstruction
+//! (self-calibration, [`selfcal`]) and metric bundle adjustment.
+//!
+//! # Model
+//!
+//! `w_fp = π_f(X_p) = f_f (1 + k₁‖n‖²) n + c`, `n = dehom(R_f X_p + t_f)`: rotations `R_f`,
+//! translations `t_f`, points `X_p ∈ R³`, focal length `f_f` (one for the sequence, or one
+//! per frame for a zooming camera), principal point `c` and radial coefficient `k₁`
+//! (known, or estimated and shared by all frames). Zero skew and unit aspect ratio.
+//!
+//! # Objective
+//!
+//! The metric bundle adjustment minimises `Σ_observed ρ(‖π_f(X_p) − w_fp‖²)` with a robust
+//! loss `ρ` ([`Loss`], Huber by default), over the observed entries only. It runs on the
+//! sparse engine of the projective stages ([`crate::projective::bundle`]): Schur complement
+//! over the points, the shared intrinsics as extra unknowns of the sparse reduced camera
+//! system, cost and memory linear in the observations. The similarity gauge (7 degrees of
+//! freedom) is held by springs on the first two cameras.
+//!
+//! # Chain
+//!
+//! projective factorization ([`crate::projective`]) → self-calibration (linear absolute dual
+//! quadric, PSD / rank 3 by Clarabel when needed) → metric bundle adjustment with the focal
+//! length(s) free (the nonlinear refinement of the calibration), then a second adjustment
+//! with the principal point and `k₁` free when asked for. With a known focal length
+//! ([`Intrinsics::focal_px`]) the upgrade only has the plane at infinity to find and the
+//! adjustment keeps `f` fixed.
+//!
+//! # Complexity
+//!
+//! Self-calibration `O(F + N)`; each adjustment iteration as the projective one
+//! (`O(n_obs)` linearisation, a sparse Cholesky of the banded reduced system).
+//!
+//! # References
+//!
+//! * R. Hartley and A. Zisserman, *Multiple View Geometry*, 2nd ed., ch. 18.1, 19.
+//! * B. Triggs, P. McLauchlan, R. Hartley and A. Fitzgibbon, "Bundle adjustment — a modern
+//!   synthesis", 1999 (robust losses §3.2, gauge §9).
+
+pub mod models;
+pub mod selfcal;
+
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::projective::bundle::{BundleModel, LmConfig};
+use crate::projective::{self, Normalization, ProjectiveModel, Stage, StageReport};
+use crate::sdp::SdpSettings;
+use crate::{Measurements, Observer, SolverReport};
+pub use models::{Focal, Loss, Metric, Robust};
+pub use selfcal::SelfCalibration;
+
+/// What is known of the intrinsics (all in pixels). Unknown ones are estimated.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Intrinsics {
+    /// Focal length, pixels. `None`: self-calibrated. Default `None`.
+    pub focal_px: Option<f64>,
+    /// Principal point, pixels. `None`: the image centre (`image_size / 2`), or the centre
+    /// of the observations' bounding box when the image size is not known either.
+    pub principal_point: Option<[f64; 2]>,
+    /// Image width and height, pixels (the tracker knows them). Default `None`.
+    pub image_size: Option<[u32; 2]>,
+}
+
+/// Settings of the perspective stages. Every field has a documented default.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PerspectiveConfig {
+    /// Known intrinsics. Default: none known.
+    pub intrinsics: Intrinsics,
+    /// One focal length per frame (a zooming camera) instead of one for the sequence.
+    /// Default false.
+    pub per_frame_focal: bool,
+    /// Estimate the principal point (shared) in a final adjustment. Default false: it is
+    /// weakly determined by tracks and usually better left at the image centre. When
+    /// neither the principal point nor the image size is known it is always estimated
+    /// (starting from the centre of the tracks' bounding box, which is only a guess).
+    pub estimate_principal_point: bool,
+    /// Estimate one radial distortion coefficient `k₁` (shared). Default false.
+    pub distortion: bool,
+    /// Robust loss of the metric bundle adjustment, in pixels. Default Huber, δ = 2 px.
+    pub loss: Loss,
+    /// Settings of the metric bundle adjustment (joint Levenberg–Marquardt: both blocks
+    /// damped, points not re-solved after each step). Default: 200 iterations, tolerances
+    /// 1e-12.
+    pub bundle: LmConfig,
+    /// Settings of the PSD-constrained self-calibration solve.
+    pub sdp: SdpSettings,
+}
+
+impl Default for PerspectiveConfig {
+    fn default() -> Self {
+        Self {
+            intrinsics: Intrinsics::default(),
+            per_frame_focal: false,
+            estimate_principal_point: false,
+            distortion: false,
+            loss: Loss::Huber(2.0),
+            bundle: LmConfig {
+                max_iterations: 200,
+                damp_points: true,
+                resolve_points: false,
+                ..LmConfig::default()
+            },
+            sdp: SdpSettings::default(),
+        }
+    }
+}
+
+impl PerspectiveConfig {
+    /// Checks every field; [`Error::InvalidConfig`] names the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        let bad =
+            |field: &'static str, message: String| Err(Error::InvalidConfig { field, message });
+        if let Some(f) = self.intrinsics.focal_px
+            && !(f.is_finite() && f > 0.0)
+        {
+            return bad(
+                "focal",
+                format!("must be a positive number of pixels, got {f}"),
+            );
+        }
+        if let Some(c) = self.intrinsics.principal_point
+            && !c.iter().all(|v| v.is_finite())
+        {
+            return bad("principal-point", format!("must be finite, got {c:?}"));
+        }
+        if let Some([w, h]) = self.intrinsics.image_size
+            && (w == 0 || h == 0)
+        {
+            return bad("image-size", format!("must be positive, got {w}x{h}"));
+        }
+        match self.loss {
+            Loss::Huber(d) | Loss::Cauchy(d) if !(d.is_finite() && d > 0.0) => {
+                return bad("loss", format!("the scale must be positive, got {d}"));
+            }
+            _ => {}
+        }
+        if self.bundle.max_iterations == 0 {
+            return bad("bundle.max_iterations", "must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// A metric perspective reconstruction, in pixels: `w_fp = π_f(X_p)`. The world frame is
+/// the first camera's (`R_0 = I`, `t_0 = 0`) and the unit is the RMS distance of the
+/// points from their centroid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PerspectiveModel {
+    /// Per frame, the focal length in pixels (all equal unless per-frame focal lengths were
+    /// estimated).
+    pub focal_px: Vec<f64>,
+    /// Principal point, pixels.
+    pub principal_point: [f64; 2],
+    /// Radial distortion coefficient `k₁` (of normalised coordinates; 0 = none).
+    pub k1: f64,
+    /// World-to-camera rotations.
+    pub rotations: Vec<Matrix3<f64>>,
+    /// World-to-camera translations: `X_c = R X + t`.
+    pub translations: Vec<Vector3<f64>>,
+    /// Points, world frame.
+    pub points: Vec<Vector3<f64>>,
+}
+
+impl PerspectiveModel {
+    /// `π_f(X)` for any point.
+    pub fn project_point(&self, f: usize, x: &Vector3<f64>) -> [f64; 2] {
+        let xc = self.rotations[f] * x + self.translations[f];
+        let (nx, ny) = (xc[0] / xc[2], xc[1] / xc[2]);
+        let d = 1.0 + self.k1 * (nx * nx + ny * ny);
+        let fo = self.focal_px[f];
+        [
+            fo * d * nx + self.principal_point[0],
+            fo * d * ny + self.principal_point[1],
+        ]
+    }
+
+    /// `π_f(X_p)`.
+    pub fn project(&self, f: usize, p: usize) -> [f64; 2] {
+        self.project_point(f, &self.points[p])
+    }
+
+    /// Camera centre `−Rᵀ t`.
+    pub fn centre(&self, f: usize) -> Vector3<f64> {
+        -(self.rotations[f].transpose() * self.translations[f])
+    }
+
+    /// Intrinsic matrix of frame `f` (distortion aside).
+    pub fn k(&self, f: usize) -> Matrix3<f64> {
+        let fo = self.focal_px[f];
+        Matrix3::new(
+            fo,
+            0.0,
+            self.principal_point[0],
+            0.0,
+            fo,
+            self.principal_point[1],
+            0.0,
+            0.0,
+            1.0,
+        )
+    }
+
+    /// The projective camera `K [R | t]` of frame `f` (distortion aside), row-major 3×4.
+    pub fn camera_matrix(&self, f: usize) -> [f64; 12] {
+        let kr = self.k(f) * self.rotations[f];
+        let kt = self.k(f) * self.translations[f];
+        std::array::from_fn(|i| {
+            let (r, c) = (i / 4, i % 4);
+            if c < 3 { kr[(r, c)] } else { kt[r] }
+        })
+    }
+
+    /// Depth of point `X` in frame `f` (positive in front of the camera).
+    pub fn depth(&self, f: usize, x: &Vector3<f64>) -> f64 {
+        (self.rotations[f] * x + self.translations[f])[2]
+    }
+}
+
+/// Outcome of [`fit`].
+#[derive(Debug, Clone)]
+pub struct PerspectiveFit {
+    pub model: PerspectiveModel,
+    /// Reprojection RMS over the observed scalars, pixels (plain, not the robust cost).
+    pub rms_px: f64,
+    /// What the self-calibration found (its focal lengths are the linear estimate's).
+    pub selfcal: SelfCalibration,
+    /// The stages: `metric-ba`, and `metric-ba-intrinsics` when the principal point or
+    /// `k₁` were estimated.
+    pub stages: Vec<StageReport>,
+    /// Report of the last adjustment.
+    pub report: SolverReport,
+    /// The principal point and scale the upgrade assumed (pixels), and where they came from.
+    pub assumed: Assumed,
+    /// Entries the robust loss down-weights below one half (residual beyond twice its
+    /// scale), (frame, track) of `meas`.
+    pub downweighted: Vec<(usize, usize)>,
+    /// Fraction of observed points in front of their camera.
+    pub in_front: f64,
+    /// Whether the principal point was estimated.
+    pub principal_point_estimated: bool,
+}
+
+/// The principal point and image scale the upgrade used, and their source.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Assumed {
+    pub principal_point: [f64; 2],
+    /// `"given"`, `"image centre"` or `"track bounding box"`.
+    pub principal_point_source: &'static str,
+    /// The normalising scale (the known focal length, else the larger image side).
+    pub scale: f64,
+}
+
+/// The principal point and scale of the upgrade: given, else the image size's, else the
+/// observations' bounding box.
+pub fn assumed_frame(meas: &Measurements, k: &Intrinsics) -> Assumed {
+    let bbox = || {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (f, p) in meas.observed_pairs() {
+            for d in 0..2 {
+                let v = meas.w[(2 * f + d, p)];
+                lo[d] = lo[d].min(v);
+                hi[d] = hi[d].max(v);
+            }
+        }
+        (lo, hi)
+    };
+    let (pp, source) = match (k.principal_point, k.image_size) {
+        (Some(c), _) => (c, "given"),
+        (None, Some([w, h])) => ([w as f64 / 2.0, h as f64 / 2.0], "image centre"),
+        (None, None) => {
+            let (lo, hi) = bbox();
+            (
+                [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0],
+                "track bounding box",
+            )
+        }
+    };
+    let side = match k.image_size {
+        Some([w, h]) => w.max(h) as f64,
+        None => {
+            let (lo, hi) = bbox();
+            (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1.0)
+        }
+    };
+    Assumed {
+        principal_point: pp,
+        principal_point_source: source,
+        scale: k.focal_px.unwrap_or(side),
+    }
+}
+
+/// Upgrades the projective model of `meas` to a metric perspective one and refines it.
+///
+/// `meas` are the observations the projective model was fitted to (same frames and
+/// tracks). Errors: bad settings ([`Error::InvalidConfig`]), a degenerate upgrade
+/// ([`Error::Degenerate`]: too little rotation for self-calibration), a numerical failure
+/// of a solver's setup. How the adjustment ended is in the report.
+pub fn fit(
+    meas: &Measurements,
+    proj: &ProjectiveModel,
+    cfg: &PerspectiveConfig,
+    run: usize,
+    observer: &mut dyn Observer,
+) -> Result<PerspectiveFit> {
+    cfg.validate()?;
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    if proj.cameras.len() != nf || proj.points.len() != np {
+        return Err(Error::Dimension {
+            context: "perspective::fit: the projective model vs the measurements",
+            expected: format!("{nf} frames, {np} tracks"),
+            got: format!(
+                "{} frames, {} tracks",
+                proj.cameras.len(),
+                proj.points.len()
+            ),
+        });
+    }
+    let assumed = assumed_frame(meas, &cfg.intrinsics);
+    let s = assumed.scale;
+    let known_focal = cfg.intrinsics.focal_px.is_some();
+    let obs: Vec<(usize, usize)> = meas.observed_pairs().collect();
+    let up = selfcal::upgrade(
+        &proj.cameras,
+        &proj.points,
+        &obs,
+        &selfcal::Frame {
+            principal_point: assumed.principal_point,
+            scale: s,
+            known_focal,
+        },
+        &cfg.sdp,
+    )?;
+    // Normalised image units: ŵ = (w − c)/s.
+    let norm = Normalization {
+        centre: assumed.principal_point,
+        scale: 1.0 / s,
+    };
+    let g = projective::graph(meas, &norm);
+    let focal0 = if known_focal {
+        1.0
+    } else {
+        let mut f: Vec<f64> = up
+            .focal
+            .iter()
+            .copied()
+            .filter(|f| f.is_finite() && *f > 0.0)
+            .collect();
+        f.sort_by(f64::total_cmp);
+        f.get(f.len() / 2).copied().unwrap_or(1.0)
+    };
+    let focal = if known_focal {
+        Focal::Fixed(1.0)
+    } else if cfg.per_frame_focal {
+        Focal::PerFrame
+    } else {
+        Focal::Shared
+    };
+    let mut metric = Metric {
+        focal,
+        principal_point: Some([0.0, 0.0]),
+        k1: Some(0.0),
+    };
+    let cl = metric.cam_len();
+    let mut cams = vec![0.0; nf * cl];
+    for f in 0..nf {
+        let c = &mut cams[f * cl..(f + 1) * cl];
+        for i in 0..3 {
+            for j in 0..3 {
+                c[3 * i + j] = up.rotations[f][(i, j)];
+            }
+            c[9 + i] = up.translations[f][i];
+        }
+        if focal == Focal::PerFrame {
+            c[12] = if up.focal[f].is_finite() && up.focal[f] > 0.0 {
+                up.focal[f]
+            } else {
+                focal0
+            };
+        }
+    }
+    let mut pts: Vec<f64> = up.points.iter().flat_map(|x| [x[0], x[1], x[2]]).collect();
+    let mut glob = metric.glob(focal0, [0.0, 0.0], 0.0);
+    let loss = match cfg.loss {
+        Loss::Squared => Loss::Squared,
+        Loss::Huber(d) => Loss::Huber(d / s),
+        Loss::Cauchy(d) => Loss::Cauchy(d / s),
+    };
+    let mut stages = Vec::new();
+    let stage = Stage {
+        name: "metric-ba",
+        what: "metric bundle adjustment",
+        rms_scale: s,
+    };
+    let mut report = stage
+        .run(
+            &Robust {
+                inner: metric,
+                loss,
+            },
+            &g,
+            &mut cams,
+            &mut pts,
+            &mut glob,
+            &cfg.bundle,
+            run,
+            observer,
+            &mut stages,
+        )?
+        .report;
+    let estimate_pp =
+        cfg.estimate_principal_point || assumed.principal_point_source == "track bounding box";
+    if estimate_pp || cfg.distortion {
+        let (f_now, _, _) = metric.intrinsics(&cams[..cl], &glob);
+        let free = Metric {
+            focal,
+            principal_point: (!estimate_pp).then_some([0.0, 0.0]),
+            k1: (!cfg.distortion).then_some(0.0),
+        };
+        let mut glob2 = free.glob(f_now, [0.0, 0.0], 0.0);
+        let stage = Stage {
+            name: "metric-ba-intrinsics",
+            what: "metric bundle adjustment (principal point, distortion)",
+            rms_scale: s,
+        };
+        report = stage
+            .run(
+                &Robust { inner: free, loss },
+                &g,
+                &mut cams,
+                &mut pts,
+                &mut glob2,
+                &cfg.bundle,
+                run,
+                observer,
+                &mut stages,
+            )?
+            .report;
+        metric = free;
+        glob = glob2;
+    }
+    // Which entries the loss down-weights (residual beyond 2δ), and the plain RMS.
+    let mut downweighted = Vec::new();
+    let (mut ss, mut n) = (0.0, 0usize);
+    let plain = metric;
+    let mut r = [0.0; 2];
+    for p in 0..np {
+        for o in g.track(p) {
+            let f = g.cam[o];
+            plain.eval(
+                &cams[f * cl..(f + 1) * cl],
+                &pts[3 * p..3 * p + 3],
+                &glob,
+                g.w[o],
+                &mut r,
+                None,
+            );
+            let e2 = r[0] * r[0] + r[1] * r[1];
+            ss += e2;
+            n += 2;
+            if loss.weight(e2) < 0.5 {
+                downweighted.push((f, p));
+            }
+        }
+    }
+    downweighted.sort_unstable();
+    let rms_px = (ss / n.max(1) as f64).sqrt() * s;
+    let model = to_pixels(&metric, &cams, &pts, &glob, nf, &assumed);
+    let front = obs
+        .iter()
+        .filter(|&&(f, p)| model.depth(f, &model.points[p]) > 0.0)
+        .count();
+    Ok(PerspectiveFit {
+        in_front: front as f64 / obs.len().max(1) as f64,
+        model,
+        rms_px,
+        selfcal: up.report,
+        stages,
+        report,
+        assumed,
+        downweighted,
+        principal_point_estimated: estimate_pp,
+    })
+}
+
+/// The adjusted parameters (normalised units) as a [`PerspectiveModel`] in pixels, in the
+/// first camera's frame, unit = RMS point spread.
+fn to_pixels(
+    m: &Metric,
+    cams: &[f64],
+    pts: &[f64],
+    glob: &[f64],
+    nf: usize,
+    a: &Assumed,
+) -> PerspectiveModel {
+    let cl = m.cam_len();
+    let s = a.scale;
+    let rot = |f: usize| Matrix3::from_row_slice(&cams[f * cl..f * cl + 9]);
+    let tr = |f: usize| Vector3::new(cams[f * cl + 9], cams[f * cl + 10], cams[f * cl + 11]);
+    let (r0, t0) = (rot(0), tr(0));
+    // World = camera 0's frame: X' = R0 X + t0; R_f' = R_f R0ᵀ, t_f' = t_f − R_f' t0.
+    let mut points: Vec<Vector3<f64>> = pts
+        .chunks(3)
+        .map(|x| r0 * Vector3::new(x[0], x[1], x[2]) + t0)
+        .collect();
+    let mut rotations = Vec::with_capacity(nf);
+    let mut translations = Vec::with_capacity(nf);
+    for f in 0..nf {
+        let rf = rot(f) * r0.transpose();
+        translations.push(tr(f) - rf * t0);
+        rotations.push(rf);
+    }
+    let n = points.len().max(1) as f64;
+    let centroid = points.iter().fold(Vector3::zeros(), |a, x| a + x) / n;
+    let spread = (points
+        .iter()
+        .map(|x| (x - centroid).norm_squared())
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    if spread > 0.0 && spread.is_finite() {
+        points.iter_mut().for_each(|x| *x /= spread);
+        translations.iter_mut().for_each(|t| *t /= spread);
+    }
+    let mut focal_px = Vec::with_capacity(nf);
+    let mut c = a.principal_point;
+    let mut k1 = 0.0;
+    for f in 0..nf {
+        let (fo, cn, k) = m.intrinsics(&cams[f * cl..(f + 1) * cl], glob);
+        focal_px.push(fo * s);
+        c = [
+            a.principal_point[0] + s * cn[0],
+            a.principal_point[1] + s * cn[1],
+        ];
+        k1 = k;
+    }
+    PerspectiveModel {
+        focal_px,
+        principal_point: c,
+        k1,
+        rotations,
+        translations,
+        points,
+    }
+}
