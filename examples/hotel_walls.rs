@@ -105,7 +105,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seed: u64 = args.get(2).map_or(Ok(1), |s| s.parse())?;
     let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path)?)?;
     let mut pts = Vec::new();
-    for p in json["points"].as_array().ok_or("no `points` array")? {
+    // The Euclidean points of a perspective reconstruction when present, else the metric
+    // (affine-family) ones.
+    let points = if json["perspective"].is_object() {
+        println!("using the perspective reconstruction's points");
+        &json["perspective"]["points"]
+    } else {
+        &json["points"]
+    };
+    for p in points.as_array().ok_or("no `points` array")? {
         if p["inlier"].as_bool() != Some(true) {
             continue;
         }

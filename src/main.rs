@@ -40,7 +40,8 @@ enum CameraArg {
     /// Projective camera `w ≃ P X` (3×4 P per frame, homogeneous points; up to a 4×4
     /// homography). Not for `synth`.
     Projective,
-    /// Pinhole perspective camera `K [R | t]` (`synth` only for now).
+    /// Pinhole perspective camera `K [R | t]`: projective factorization, self-calibration
+    /// (or the given `--focal`), metric bundle adjustment.
     Perspective,
 }
 
@@ -101,6 +102,53 @@ struct ReconstructOpts {
     /// Seed of every random choice (robust sampling, random starts, randomized SVD).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Perspective camera: the known focal length, pixels (default: self-calibrated).
+    #[arg(long, value_name = "PX")]
+    focal: Option<f64>,
+    /// Perspective camera: the known principal point, pixels (default: the image centre,
+    /// or estimated when the image size is not known either).
+    #[arg(long, value_name = "X,Y", value_parser = parse_pair::<f64>)]
+    principal_point: Option<[f64; 2]>,
+    /// Perspective camera: the image size, pixels (`rank3 run` knows it from the frames).
+    #[arg(long, value_name = "W,H", value_parser = parse_pair::<u32>)]
+    image_size: Option<[u32; 2]>,
+    /// Perspective camera: one focal length per frame (a zooming camera).
+    #[arg(long)]
+    per_frame_focal: bool,
+    /// Perspective camera: estimate the principal point in the bundle adjustment.
+    #[arg(long)]
+    estimate_principal_point: bool,
+    /// Perspective camera: estimate one radial distortion coefficient k1.
+    #[arg(long)]
+    distortion: bool,
+    /// Robust loss of the perspective bundle adjustment.
+    #[arg(long, value_enum, default_value = "huber")]
+    loss: LossArg,
+    /// Scale of the robust loss, pixels.
+    #[arg(long, value_name = "PX", default_value_t = 2.0)]
+    loss_scale: f64,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum LossArg {
+    /// Plain least squares.
+    None,
+    /// Huber: quadratic within the scale, linear beyond.
+    Huber,
+    /// Cauchy: logarithmic beyond the scale.
+    Cauchy,
+}
+
+/// Parses `A,B` (or `AxB`) into two values.
+fn parse_pair<T: std::str::FromStr>(s: &str) -> Result<[T; 2], String> {
+    let parts: Vec<&str> = s.split([',', 'x', 'X']).map(str::trim).collect();
+    match parts.as_slice() {
+        [a, b] => match (a.parse(), b.parse()) {
+            (Ok(a), Ok(b)) => Ok([a, b]),
+            _ => Err(format!("`{s}`: expected two numbers as A,B")),
+        },
+        _ => Err(format!("`{s}`: expected two numbers as A,B")),
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -221,7 +269,7 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         t.n_observed(),
         100.0 * t.fill()
     );
-    let config = a.opts.config(a.camera);
+    let config = a.opts.config(a.camera, None);
     #[cfg(feature = "rerun")]
     let rec = rank3::recording::reconstruct_recorded(recording.as_ref(), t, &config)?;
     #[cfg(not(feature = "rerun"))]
@@ -232,7 +280,9 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
 }
 
 impl ReconstructOpts {
-    fn config(&self, camera: CameraArg) -> Config {
+    /// The library configuration; `image_size` is what the tracker saw (`run`), used
+    /// unless `--image-size` is given.
+    fn config(&self, camera: CameraArg, image_size: Option<[u32; 2]>) -> Config {
         let a = self;
         let mut config = Config {
             camera: camera.into(),
@@ -259,6 +309,20 @@ impl ReconstructOpts {
         if a.no_refine {
             config.refine = None;
         }
+        let p = &mut config.perspective;
+        p.intrinsics = rank3::perspective::Intrinsics {
+            focal_px: a.focal,
+            principal_point: a.principal_point,
+            image_size: a.image_size.or(image_size),
+        };
+        p.per_frame_focal = a.per_frame_focal;
+        p.estimate_principal_point = a.estimate_principal_point;
+        p.distortion = a.distortion;
+        p.loss = match a.loss {
+            LossArg::None => rank3::perspective::Loss::Squared,
+            LossArg::Huber => rank3::perspective::Loss::Huber(a.loss_scale),
+            LossArg::Cauchy => rank3::perspective::Loss::Cauchy(a.loss_scale),
+        };
         config
     }
 }
@@ -343,6 +407,59 @@ fn print_summary(rec: &Reconstruction, out: &Path) {
                 s.stage, s.rms_before_px, s.rms_after_px, s.status, s.iterations, s.seconds
             );
         }
+    }
+    if let Some(p) = &rec.perspective
+        && let Some(sc) = &p.self_calibration
+    {
+        eprintln!(
+            "self-calibration: {} (linear Q eigenvalues {:.3} {:.3} {:.3} {:.3}{}), {:.1} % of \
+             observations in front",
+            if sc.sdp { "PSD-constrained" } else { "linear" },
+            sc.linear_eigenvalues[0],
+            sc.linear_eigenvalues[1],
+            sc.linear_eigenvalues[2],
+            sc.linear_eigenvalues[3],
+            sc.sdp_status
+                .as_ref()
+                .map_or(String::new(), |s| format!(", SDP {s}")),
+            100.0 * p.in_front
+        );
+    }
+    if let Some(p) = &rec.perspective {
+        let starts: Vec<String> = p
+            .starts
+            .iter()
+            .map(|s| {
+                format!(
+                    "{}{} f={:.0}: {:.3}{}",
+                    s.kind,
+                    if s.mirrored { " (mirrored)" } else { "" },
+                    s.focal_px,
+                    s.rms_px,
+                    if s.chosen { " ←" } else { "" }
+                )
+            })
+            .collect();
+        eprintln!(
+            "perspective starts (RMS px after screening): {}",
+            starts.join(", ")
+        );
+        for s in &p.stages {
+            eprintln!(
+                "perspective {}: RMS {:.6} → {:.6} px ({:?}, {} iterations, {:.3} s)",
+                s.stage, s.rms_before_px, s.rms_after_px, s.status, s.iterations, s.seconds
+            );
+        }
+        let k = &p.intrinsics;
+        eprintln!(
+            "intrinsics: focal {:.2} px ({}), principal point ({:.2}, {:.2}) ({}), k1 {:.4}",
+            k.focal_px,
+            k.focal,
+            k.principal_point[0],
+            k.principal_point[1],
+            k.principal_point_source,
+            k.k1
+        );
     }
     println!(
         "{} camera, {} frames, {} points, RMS {:.6} px → {}",
@@ -521,6 +638,8 @@ fn bar_style(template: &str) -> indicatif::ProgressStyle {
 /// What tracking produced: the table and the per-frame counts.
 struct Tracked {
     table: rank3::TrackTable,
+    /// Width and height of the frames, pixels.
+    image_size: Option<[u32; 2]>,
     /// Per-frame counts (recorded with `--rrd`).
     #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
     stats: Vec<rank3::track::FrameStats>,
@@ -551,7 +670,9 @@ fn track_input(
     let t0 = std::time::Instant::now();
     let cpu0 = process_cpu_seconds();
     let mut stats = Vec::new();
+    let mut image_size = None;
     let result = rank3::track::track_source(&mut src, &cfg, init, &mut |s, image| {
+        image_size.get_or_insert([image.width as u32, image.height as u32]);
         bar.inc(1);
         bar.set_message(format!("{} alive", s.alive));
         stats.push(*s);
@@ -586,7 +707,11 @@ fn track_input(
         summary.frames as f64 / wall.max(1e-9),
         cpu.map_or(String::new(), |c| format!(", CPU {c:.3} s with decoding"))
     );
-    Ok(Tracked { table, stats })
+    Ok(Tracked {
+        table,
+        stats,
+        image_size,
+    })
 }
 
 /// Records what tracking produced besides the frames (logged as they are tracked): the
@@ -720,6 +845,7 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
         false,
     )?;
     let mut table = tracked.table;
+    let tracked_size = tracked.image_size;
     let tracks = a.out.join("tracks.csv");
     table.write(&tracks)?;
     eprintln!(
@@ -741,7 +867,7 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
         );
         table = table.select(&frames, &full);
     }
-    let config = a.recon.config(a.camera);
+    let config = a.recon.config(a.camera, tracked_size);
     let spinner = indicatif::ProgressBar::new_spinner()
         .with_style(bar_style("reconstructing {spinner} {elapsed} {msg}"));
     let mut obs = SpinnerObserver(spinner.clone());

@@ -409,7 +409,9 @@ pub struct PerspectiveResult {
     /// Reprojection RMS over the fit's observed scalars, pixels.
     pub rms_px: f64,
     pub intrinsics: PerspectiveIntrinsics,
-    pub self_calibration: perspective::SelfCalibration,
+    pub self_calibration: Option<perspective::SelfCalibration>,
+    /// The starts of the metric adjustment that were screened, and which was kept.
+    pub starts: Vec<perspective::StartReport>,
     pub stages: Vec<projective::StageReport>,
     pub cameras: Vec<PerspectiveFrame>,
     /// In the input's track order (fitted and outlier tracks, as `points`).
@@ -528,6 +530,7 @@ impl PerspectiveResult {
             rms_px: pf.rms_px,
             intrinsics,
             self_calibration: pf.selfcal,
+            starts: pf.starts,
             stages: pf.stages,
             cameras,
             points: points.into_iter().map(|(_, p)| p).collect(),
@@ -922,7 +925,7 @@ impl Reconstruction {
         let perspective = match (&projective, config.camera) {
             (Some(pf), CameraModel::Perspective) => {
                 let per = timer.run("perspective", |obs| {
-                    perspective::fit(&meas, &pf.model, &config.perspective, 0, obs)
+                    perspective::fit(&meas, &pf.model, Some(&model), &config.perspective, 0, obs)
                 })?;
                 for st in &per.stages {
                     if st.status == SolverStatus::Stalled {
