@@ -101,6 +101,12 @@ pub enum Error {
     /// stream ended mid-frame.
     #[error("{}: {message}", path.display())]
     Video { path: PathBuf, message: String },
+    /// An in-memory model breaks its own rules (duplicate ids, a reference that resolves to
+    /// nothing, a track that disagrees with the observations it lists); see
+    /// [`crate::colmap::ColmapModel::validate`]. Read from files, the same faults are
+    /// [`Error::Parse`] naming the file, line and field.
+    #[error("invalid model: {0}")]
+    InvalidModel(String),
     /// The data do not determine a solution (e.g. all points collinear).
     #[error("degenerate input: {0}")]
     Degenerate(String),

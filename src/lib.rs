@@ -19,6 +19,7 @@
 mod lapack_shim;
 
 pub mod camera;
+pub mod colmap;
 pub mod completion;
 pub mod datasets;
 pub mod error;
