@@ -275,7 +275,21 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     #[cfg(not(feature = "rerun"))]
     let rec = Reconstruction::from_tracks(t, &config)?;
     rank3::output::write_all(&rec, &a.out)?;
+    write_colmap(&rec, t, &a.out)?;
     print_summary(&rec, &a.out);
+    Ok(())
+}
+
+/// With a perspective result, the COLMAP text model in `OUT/colmap/`.
+fn write_colmap(
+    rec: &Reconstruction,
+    table: &rank3::TrackTable,
+    out: &Path,
+) -> Result<(), rank3::Error> {
+    let dir = out.join("colmap");
+    if rank3::output::write_colmap(rec, table, &dir)? {
+        eprintln!("wrote COLMAP model {}", dir.display());
+    }
     Ok(())
 }
 
@@ -880,6 +894,7 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
     spinner.finish_and_clear();
     let rec = rec?;
     rank3::output::write_all(&rec, &a.out)?;
+    write_colmap(&rec, &table, &a.out)?;
     print_summary(&rec, &a.out);
     Ok(())
 }

@@ -54,20 +54,172 @@ pub fn write_completed(rec: &Reconstruction, path: &Path) -> Result<()> {
 }
 
 /// Binary little-endian PLY with `float x, y, z` per point (and `uchar inlier`).
+/// With a perspective result, its Euclidean points; otherwise the metric (affine-family)
+/// ones.
 pub fn write_ply(rec: &Reconstruction, path: &Path) -> Result<()> {
-    let mut buf = Vec::with_capacity(64 + rec.points.len() * 13);
+    let points = rec.perspective.as_ref().map_or(&rec.points, |p| &p.points);
+    let mut buf = Vec::with_capacity(64 + points.len() * 13);
     let _ = write!(
         buf,
         "ply\nformat binary_little_endian 1.0\ncomment rank3 metric structure\nelement vertex \
          {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar inlier\n\
          end_header\n",
-        rec.points.len()
+        points.len()
     );
-    for p in &rec.points {
+    for p in points {
         for v in p.xyz {
             buf.extend_from_slice(&(v as f32).to_le_bytes());
         }
         buf.push(u8::from(p.inlier));
     }
     std::fs::write(path, buf).map_err(|e| Error::io(path, e))
+}
+
+/// The perspective reconstruction of `rec` as a COLMAP sparse model ([`crate::colmap`]):
+/// one `SIMPLE_PINHOLE` camera (`SIMPLE_RADIAL` when `k₁ ≠ 0`) shared by every image, or
+/// one per image with per-frame focal lengths; one image per fitted frame, named by its
+/// frame id (white space replaced by `_`), with every observation of `table` in that frame
+/// as a keypoint; one 3D point per fitted track, its track the keypoints the fit used
+/// (entries the robust pass flagged stay keypoints without a 3D point), its error the
+/// track's reprojection RMS. Pixel coordinates are shifted by
+/// [`crate::colmap::PIXEL_CENTRE_OFFSET`] (rank3 puts the centre of the top-left pixel at
+/// (0, 0), COLMAP at (0.5, 0.5)). The image size is the given one, else the smallest that
+/// holds every observation. `None` without a perspective result. `O(observations)`.
+pub fn colmap_model(
+    rec: &Reconstruction,
+    table: &crate::TrackTable,
+) -> Option<crate::colmap::ColmapModel> {
+    use crate::colmap::{
+        ColmapCamera, ColmapCameraModel, ColmapImage, ColmapModel, ColmapPoint,
+        PIXEL_CENTRE_OFFSET as OFF,
+    };
+    let per = rec.perspective.as_ref()?;
+    let m = &per.model;
+    let (w, h) = match per.intrinsics.image_size {
+        Some([w, h]) => (w, h),
+        None => {
+            let (mut mx, mut my) = (1.0f64, 1.0f64);
+            for f in 0..table.n_frames() {
+                for p in 0..table.n_tracks() {
+                    if let Some(q) = table.get(f, p) {
+                        mx = mx.max(q[0] + 1.0);
+                        my = my.max(q[1] + 1.0);
+                    }
+                }
+            }
+            (mx.ceil() as u32, my.ceil() as u32)
+        }
+    };
+    let camera = |id: u32, f: f64| ColmapCamera {
+        id,
+        model: if m.k1 != 0.0 {
+            ColmapCameraModel::SimpleRadial {
+                f,
+                cx: m.principal_point[0] + OFF,
+                cy: m.principal_point[1] + OFF,
+                k: m.k1,
+            }
+        } else {
+            ColmapCameraModel::SimplePinhole {
+                f,
+                cx: m.principal_point[0] + OFF,
+                cy: m.principal_point[1] + OFF,
+            }
+        },
+        width: w,
+        height: h,
+    };
+    let shared = per.intrinsics.focal != "per-frame";
+    let nf = rec.kept_frames.len();
+    let cameras: Vec<ColmapCamera> = if shared {
+        vec![camera(1, m.focal_px[0])]
+    } else {
+        (0..nf)
+            .map(|k| camera(k as u32 + 1, m.focal_px[k]))
+            .collect()
+    };
+    // Input track index → 3D point id (fitted tracks), and the flagged entries.
+    let mut point_of = vec![None; table.n_tracks()];
+    for (k, &p) in rec.kept_tracks.iter().enumerate() {
+        point_of[p] = Some(k as u64 + 1);
+    }
+    let flagged: std::collections::HashSet<(usize, usize)> = rec
+        .robust
+        .as_ref()
+        .map(|r| r.flagged_indices.iter().copied().collect())
+        .unwrap_or_default();
+    let rms_of: std::collections::HashMap<String, f64> = per
+        .points
+        .iter()
+        .map(|r| (r.track.to_string(), r.rms_px))
+        .collect();
+    let mut points: Vec<ColmapPoint> = rec
+        .kept_tracks
+        .iter()
+        .enumerate()
+        .map(|(k, &p)| {
+            let x = m.points[k];
+            let err = rms_of
+                .get(&table.track_ids()[p].to_string())
+                .copied()
+                .unwrap_or(-1.0);
+            ColmapPoint {
+                id: k as u64 + 1,
+                xyz: [x[0], x[1], x[2]],
+                rgb: [128, 128, 128],
+                error: if err.is_finite() { err } else { -1.0 },
+                track: Vec::new(),
+            }
+        })
+        .collect();
+    let mut images = Vec::with_capacity(nf);
+    for (k, &f) in rec.kept_frames.iter().enumerate() {
+        let id = k as u32 + 1;
+        let mut points2d = Vec::new();
+        for p in 0..table.n_tracks() {
+            let Some(q) = table.get(f, p) else { continue };
+            let pid = point_of[p].filter(|_| !flagged.contains(&(f, p)));
+            if let Some(pid) = pid {
+                points[pid as usize - 1].track.push((id, points2d.len()));
+            }
+            points2d.push(([q[0] + OFF, q[1] + OFF], pid));
+        }
+        let name: String = table.frame_ids()[f]
+            .to_string()
+            .chars()
+            .map(|c| if c.is_whitespace() { '_' } else { c })
+            .collect();
+        images.push(ColmapImage {
+            id,
+            camera_id: if shared { 1 } else { id },
+            name,
+            rotation: m.rotations[k],
+            translation: m.translations[k],
+            points2d,
+        });
+    }
+    // A point whose entries were all flagged has no track: COLMAP needs at least one.
+    points.retain(|p| !p.track.is_empty());
+    let keep: std::collections::HashSet<u64> = points.iter().map(|p| p.id).collect();
+    for im in &mut images {
+        for kp in &mut im.points2d {
+            if kp.1.is_some_and(|id| !keep.contains(&id)) {
+                kp.1 = None;
+            }
+        }
+    }
+    Some(ColmapModel {
+        cameras,
+        images,
+        points,
+    })
+}
+
+/// Writes [`colmap_model`] into `dir` (cameras.txt, images.txt, points3D.txt); returns
+/// whether there was a perspective result to write.
+pub fn write_colmap(rec: &Reconstruction, table: &crate::TrackTable, dir: &Path) -> Result<bool> {
+    match colmap_model(rec, table) {
+        Some(model) => model.write_text(dir).map(|_| true),
+        None => Ok(false),
+    }
 }
