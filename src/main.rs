@@ -253,6 +253,7 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         "rank3",
         rank3::recording::LayoutParts {
             reconstruction: true,
+            perspective: matches!(a.camera, CameraArg::Perspective),
             ..Default::default()
         },
     )?;
@@ -766,6 +767,7 @@ fn track_recorded(
     opts: &TrackOpts,
     #[cfg(feature = "rerun")] record: &rank3::recording::RecordingArgs,
     #[cfg_attr(not(feature = "rerun"), allow(unused_variables))] log_table: bool,
+    #[cfg_attr(not(feature = "rerun"), allow(unused_variables))] perspective: bool,
 ) -> Result<(Tracked, Recording), rank3::Error> {
     // `rank3 track` logs the table itself; `rank3 run` reconstructs from it.
     #[cfg(feature = "rerun")]
@@ -775,6 +777,7 @@ fn track_recorded(
             tracking: true,
             reconstruction: !log_table,
             truth: false,
+            perspective: !log_table && perspective,
         },
     )?;
     #[cfg(not(feature = "rerun"))]
@@ -812,6 +815,7 @@ fn track_cmd(a: &TrackArgs) -> Result<(), rank3::Error> {
         #[cfg(feature = "rerun")]
         &a.record,
         true,
+        false,
     )?;
     let table = tracked.table;
     table.write(&a.out)?;
@@ -857,6 +861,7 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
         #[cfg(feature = "rerun")]
         &a.record,
         false,
+        matches!(a.camera, CameraArg::Perspective),
     )?;
     let mut table = tracked.table;
     let tracked_size = tracked.image_size;

@@ -14,7 +14,8 @@
 //! # Timelines
 //!
 //! * `stage` (sequence): [`STAGES`] gives the index of each stage — 0 input, 1 set-aside,
-//!   2 robust, 3 factorize, 4 metric-upgrade, 5 refine, 6 projective, 7 result. Stages the table does not
+//!   2 robust, 3 factorize, 4 metric-upgrade, 5 refine, 6 projective, 7 perspective, 8 result.
+//!   Stages the table does not
 //!   know get indices after it, in order of appearance.
 //! * `frame` (sequence): the frame's index in the *input* table (not its id).
 //! * `iteration` (sequence): solver iteration.
@@ -32,6 +33,12 @@
 //! | `image/projective/residuals` | Arrows2D per frame | observed → `π(P_f X_p)` (projective camera) |
 //! | `projective/stages` | TextDocument | each projective stage's RMS before/after, status, iterations |
 //! | `projective/frame_rms` | Scalars per frame | per-frame RMS of the projective model |
+//! | `image/perspective/residuals` | Arrows2D per frame | observed → `π(K(RX + t))` (perspective camera) |
+//! | `perspective/world/points`, `perspective/world/outliers` | Points3D | Euclidean structure (coloured by per-point RMS), outlier tracks' points (red) |
+//! | `perspective/world/camera` | Transform3D + Pinhole per frame | the camera's pose and frustum with the estimated intrinsics |
+//! | `perspective/world/frustums/<k>` | Transform3D + Pinhole (static) | up to 24 evenly spaced cameras' frustums |
+//! | `perspective/world/trajectory` | LineStrips3D | camera centres in frame order |
+//! | `perspective/report` | TextDocument | intrinsics, self-calibration, starts, adjustment stages |
 //! | `image/robust/{outliers,flagged}` | LineStrips2D / Points2D | robust pass: outlier tracks (labelled), flagged entries |
 //! | `factorization/visibility` | Image (L8) | F×N mask, white = observed |
 //! | `factorization/W` | Tensor (f32) | the kept 2F'×N' measurement matrix |
@@ -100,7 +107,7 @@ use crate::tracks::SetAsideKind;
 use crate::{Config, Error, Event, MetricModel, Observer, Reconstruction, TrackTable};
 
 /// Stage names in `stage`-timeline order (their index is the timeline value).
-pub const STAGES: [&str; 8] = [
+pub const STAGES: [&str; 9] = [
     "input",
     "set-aside",
     "robust",
@@ -108,6 +115,7 @@ pub const STAGES: [&str; 8] = [
     "metric-upgrade",
     "refine",
     "projective",
+    "perspective",
     "result",
 ];
 
@@ -135,6 +143,16 @@ pub mod paths {
     pub const PROJECTIVE_STAGES: &str = "projective/stages";
     /// Per-frame RMS of the projective model, pixels.
     pub const PROJECTIVE_FRAME_RMS: &str = "projective/frame_rms";
+    /// Observed → perspective prediction (camera `perspective`).
+    pub const PERSPECTIVE_RESIDUALS: &str = "image/perspective/residuals";
+    /// The Euclidean (perspective) structure, its outliers, cameras and trajectory.
+    pub const PERSPECTIVE_POINTS: &str = "perspective/world/points";
+    pub const PERSPECTIVE_OUTLIERS: &str = "perspective/world/outliers";
+    pub const PERSPECTIVE_CAMERA: &str = "perspective/world/camera";
+    pub const PERSPECTIVE_FRUSTUMS: &str = "perspective/world/frustums";
+    pub const PERSPECTIVE_TRAJECTORY: &str = "perspective/world/trajectory";
+    /// Intrinsics, self-calibration, starts and stages (markdown).
+    pub const PERSPECTIVE_REPORT: &str = "perspective/report";
     pub const ROBUST_OUTLIERS: &str = "image/robust/outliers";
     pub const ROBUST_FLAGGED: &str = "image/robust/flagged";
     pub const ROBUST_INLIER_COUNT: &str = "solver/ransac/inliers";
@@ -316,6 +334,9 @@ pub struct LayoutParts {
     pub reconstruction: bool,
     /// Synthetic ground truth (`rank3 synth`).
     pub truth: bool,
+    /// A perspective reconstruction: its Euclidean structure and frustums beside the
+    /// affine-model structure.
+    pub perspective: bool,
 }
 
 /// Sends a viewer layout (a Rerun blueprint, made active and the default for the
@@ -334,7 +355,19 @@ pub fn send_layout(rec: &RecordingStream, parts: LayoutParts) -> RecordingResult
     };
     let image = Spatial2DView::new("image: tracks, residuals, robust flags").with_origin("/image");
     let mut scene: Vec<ContainerLike> = Vec::new();
-    if parts.reconstruction {
+    if parts.reconstruction && parts.perspective {
+        scene.push(
+            Horizontal::new([
+                Spatial3DView::new("perspective: Euclidean structure, camera frustums")
+                    .with_origin("/perspective/world")
+                    .into(),
+                Spatial3DView::new("affine model: structure and cameras")
+                    .with_origin("/world")
+                    .into(),
+            ])
+            .into(),
+        );
+    } else if parts.reconstruction {
         scene.push(
             Spatial3DView::new("metric structure and cameras")
                 .with_origin("/world")
@@ -1086,6 +1119,7 @@ fn log_result(
     log_factorization(rec, result)?;
     log_metric(rec, result)?;
     log_projective(rec, table, result, options)?;
+    log_perspective(rec, table, result, options)?;
     at_stage(rec, "result");
     rec.log(
         paths::SUMMARY,
@@ -1548,6 +1582,175 @@ fn log_projective(
         &TextDocument::from_markdown(projective_markdown(p)),
     )?;
     Ok(())
+}
+
+/// The perspective reconstruction: residual arrows, Euclidean points, the camera path with
+/// pinhole frustums of the estimated intrinsics, and a report.
+fn log_perspective(
+    rec: &RecordingStream,
+    table: &TrackTable,
+    r: &Reconstruction,
+    options: &RecordingOptions,
+) -> RecordingResult {
+    let Some(p) = &r.perspective else {
+        return Ok(());
+    };
+    let m = &p.model;
+    send_residual_arrows(
+        rec,
+        table,
+        r,
+        options,
+        paths::PERSPECTIVE_RESIDUALS,
+        "perspective",
+        |kf, kp| m.project(kf, kp),
+    )?;
+    at_stage(rec, "perspective");
+    let fitted: Vec<&crate::reconstruction::PointResult> =
+        p.points.iter().filter(|q| q.inlier).collect();
+    let max_rms = fitted
+        .iter()
+        .map(|q| q.rms_px)
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, f64::max)
+        .max(1e-12);
+    // The unit is the points' RMS spread about their centroid: sizes relative to it.
+    rec.log(
+        paths::PERSPECTIVE_POINTS,
+        &Points3D::new(m.points.iter().map(f3))
+            .with_colors(fitted.iter().map(|q| heat(q.rms_px / max_rms)))
+            .with_radii([0.01f32]),
+    )?;
+    rec.log(
+        paths::PERSPECTIVE_OUTLIERS,
+        &Points3D::new(
+            p.outlier_points
+                .iter()
+                .filter(|x| x.iter().all(|v| v.is_finite()))
+                .map(f3),
+        )
+        .with_colors([RED])
+        .with_radii([0.012f32]),
+    )?;
+    let nf = m.rotations.len();
+    let centres: Vec<nalgebra::Vector3<f64>> = (0..nf).map(|f| m.centre(f)).collect();
+    rec.log(
+        paths::PERSPECTIVE_TRAJECTORY,
+        &LineStrips3D::new([LineStrip3D::from_iter(centres.iter().map(f3))]).with_colors([GREY]),
+    )?;
+    let size = p
+        .intrinsics
+        .image_size
+        .map(|[w, h]| [w as f32, h as f32])
+        .unwrap_or([
+            (2.0 * m.principal_point[0] + 1.0) as f32,
+            (2.0 * m.principal_point[1] + 1.0) as f32,
+        ]);
+    let pinhole = |f: usize| {
+        rerun::Pinhole::from_focal_length_and_resolution([m.focal_px[f] as f32; 2], size)
+            .with_principal_point([m.principal_point[0] as f32, m.principal_point[1] as f32])
+            .with_image_plane_distance(0.15f32)
+    };
+    // Camera-to-world: translation = centre, rotation = Rᵀ (its columns are the camera's
+    // x (right), y (down), z (forward) axes, Rerun's default RDF pinhole frame).
+    let pose = |f: usize| {
+        let rt = m.rotations[f].transpose();
+        let cols: [[f32; 3]; 3] =
+            std::array::from_fn(|c| std::array::from_fn(|row| rt[(row, c)] as f32));
+        Transform3D::from_translation_mat3x3(f3(&centres[f]), cols)
+    };
+    let step = nf.div_ceil(24).max(1);
+    for f in (0..nf).step_by(step) {
+        let path = format!("{}/{f}", paths::PERSPECTIVE_FRUSTUMS);
+        rec.log_static(path.clone(), &pose(f))?;
+        rec.log_static(path, &pinhole(f))?;
+    }
+    for f in 0..nf {
+        rec.set_time_sequence(TIMELINE_FRAME, r.kept_frames[f] as i64);
+        rec.log(paths::PERSPECTIVE_CAMERA, &pose(f))?;
+        rec.log(paths::PERSPECTIVE_CAMERA, &pinhole(f))?;
+    }
+    rec.disable_timeline(TIMELINE_FRAME);
+    rec.log(
+        paths::PERSPECTIVE_REPORT,
+        &TextDocument::from_markdown(perspective_markdown(p)),
+    )?;
+    Ok(())
+}
+
+/// Markdown report of the perspective stages.
+fn perspective_markdown(p: &crate::reconstruction::PerspectiveResult) -> String {
+    let k = &p.intrinsics;
+    let mut s = format!(
+        "# Perspective reconstruction
+
+RMS {:.6} px; {:.1} % of the observations in front of          their camera.
+
+## Intrinsics
+
+* focal length {:.2} px ({})
+* principal point          ({:.2}, {:.2}) ({})
+* k₁ {:.5}
+",
+        p.rms_px,
+        100.0 * p.in_front,
+        k.focal_px,
+        k.focal,
+        k.principal_point[0],
+        k.principal_point[1],
+        k.principal_point_source,
+        k.k1
+    );
+    if let Some(sc) = &p.self_calibration {
+        s.push_str(&format!(
+            "
+## Self-calibration
+
+* linear absolute dual quadric eigenvalues: {:.4} {:.4}              {:.4} {:.4}
+* PSD-constrained solve: {}
+",
+            sc.linear_eigenvalues[0],
+            sc.linear_eigenvalues[1],
+            sc.linear_eigenvalues[2],
+            sc.linear_eigenvalues[3],
+            sc.sdp_status.as_deref().unwrap_or("not needed")
+        ));
+    }
+    s.push_str(
+        "
+## Starts (screened)
+
+| start | focal (px) | mirrored | RMS (px) | kept |
+|---|---|---|---|---|
+",
+    );
+    for st in &p.starts {
+        s.push_str(&format!(
+            "| {} | {:.1} | {} | {:.4} | {} |
+",
+            st.kind,
+            st.focal_px,
+            st.mirrored,
+            st.rms_px,
+            if st.chosen { "✓" } else { "" }
+        ));
+    }
+    s.push_str(
+        "
+## Adjustment
+
+| stage | status | iterations | RMS before (px) | RMS after (px) | s |
+|---|---|---|---|---|---|
+",
+    );
+    for st in &p.stages {
+        s.push_str(&format!(
+            "| {} | {:?} | {} | {:.6} | {:.6} | {:.3} |
+",
+            st.stage, st.status, st.iterations, st.rms_before_px, st.rms_after_px, st.seconds
+        ));
+    }
+    s
 }
 
 /// Markdown table of the projective stages.

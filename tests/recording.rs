@@ -1243,3 +1243,57 @@ fn reconstruct_recorded_projective_stages() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The perspective camera's recording: residual arrows, the Euclidean points, one pinhole
+/// (with the estimated focal length) and pose per fitted frame, static frustums, the report.
+#[test]
+fn reconstruct_recorded_perspective_frustums() {
+    let scene = generate(&SynthConfig {
+        camera: rank3::CameraModel::Perspective,
+        frames: 10,
+        points: 40,
+        noise: 0.3,
+        missing: 0.3,
+        distance: 2.5,
+        seed: 3,
+        ..Default::default()
+    })
+    .unwrap();
+    let table = &scene.table;
+    let (dir, path, rec) = temp_recording("perspective");
+    let mut config = Config {
+        camera: rank3::CameraModel::Perspective,
+        robust: None,
+        ..Config::default()
+    };
+    config.perspective.intrinsics.image_size = Some([641, 481]);
+    let result = recording::reconstruct_recorded(Some(&rec), table, &config).unwrap();
+    drop(rec);
+    let p = result.perspective.as_ref().expect("perspective result");
+    let c = read_rrd(&path);
+    assert_eq!(
+        c.get(paths::PERSPECTIVE_POINTS, "Points3D:positions")
+            .total(),
+        result.kept_tracks.len()
+    );
+    let nf = result.kept_frames.len();
+    let pin = c.get(paths::PERSPECTIVE_CAMERA, "Pinhole:image_from_camera");
+    assert_eq!(pin.rows(), nf, "one pinhole per fitted frame");
+    assert_eq!(pin.times["frame"].len(), nf);
+    assert_eq!(
+        c.get(paths::PERSPECTIVE_CAMERA, "Transform3D:translation")
+            .rows(),
+        nf
+    );
+    let f0 = c.get(
+        &format!("{}/0", paths::PERSPECTIVE_FRUSTUMS),
+        "Pinhole:image_from_camera",
+    );
+    assert!(f0.is_static);
+    assert_eq!(
+        c.get(paths::PERSPECTIVE_REPORT, "TextDocument:text").rows(),
+        1
+    );
+    assert!(p.intrinsics.focal_px > 0.0);
+    std::fs::remove_dir_all(&dir).ok();
+}
