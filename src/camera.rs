@@ -31,6 +31,11 @@ pub enum CameraModel {
     /// `w ≃ K_f (R_f X + t_f)`. The projective stages run first, then the Euclidean upgrade
     /// and the metric bundle adjustment ([`crate::perspective`]).
     Perspective,
+    /// Chosen from the data: the pipeline fits the scaled orthographic and the perspective
+    /// cameras to the same tracks and keeps the perspective one when it explains the data
+    /// significantly better ([`crate::reconstruction::ModelSelection`]); the result names
+    /// the model it kept.
+    Auto,
 }
 
 impl CameraModel {
@@ -46,7 +51,15 @@ impl CameraModel {
 
     /// Whether the projective stages run (projective and perspective cameras).
     pub fn is_projective(self) -> bool {
-        matches!(self, CameraModel::Projective | CameraModel::Perspective)
+        matches!(
+            self,
+            CameraModel::Projective | CameraModel::Perspective | CameraModel::Auto
+        )
+    }
+
+    /// Whether the Euclidean perspective stages run (perspective and auto).
+    pub fn is_perspective(self) -> bool {
+        matches!(self, CameraModel::Perspective | CameraModel::Auto)
     }
 
     /// Whether the model is affine (orthographic or scaled orthographic).
@@ -65,6 +78,7 @@ impl std::fmt::Display for CameraModel {
             CameraModel::ScaledOrthographic => "scaled-orthographic",
             CameraModel::Projective => "projective",
             CameraModel::Perspective => "perspective",
+            CameraModel::Auto => "auto",
         })
     }
 }

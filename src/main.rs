@@ -33,6 +33,9 @@ enum Command {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum CameraArg {
+    /// Chosen from the data: the perspective camera when it explains the tracks
+    /// significantly better than the scaled orthographic one (BIC), else the latter.
+    Auto,
     /// Orthographic projection (affine, unit scale).
     Orthographic,
     /// Scaled orthographic / weak perspective (affine, one scale per frame).
@@ -52,6 +55,7 @@ impl From<CameraArg> for CameraModel {
             CameraArg::ScaledOrthographic => CameraModel::ScaledOrthographic,
             CameraArg::Perspective => CameraModel::Perspective,
             CameraArg::Projective => CameraModel::Projective,
+            CameraArg::Auto => CameraModel::Auto,
         }
     }
 }
@@ -63,9 +67,9 @@ struct ReconstructArgs {
     /// Output directory (reconstruction.json, completed.txt, points.ply).
     #[arg(long)]
     out: PathBuf,
-    /// Camera model: orthographic, scaled-orthographic or projective (the projective
-    /// reconstruction also holds the affine model it starts from).
-    #[arg(long, value_enum, default_value = "orthographic")]
+    /// Camera model (the projective and perspective reconstructions also hold the affine
+    /// model they start from).
+    #[arg(long, value_enum, default_value = "auto")]
     camera: CameraArg,
     #[command(flatten)]
     opts: ReconstructOpts,
@@ -253,7 +257,7 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         "rank3",
         rank3::recording::LayoutParts {
             reconstruction: true,
-            perspective: matches!(a.camera, CameraArg::Perspective),
+            perspective: matches!(a.camera, CameraArg::Perspective | CameraArg::Auto),
             ..Default::default()
         },
     )?;
@@ -355,17 +359,20 @@ fn print_summary(rec: &Reconstruction, out: &Path) {
         .take(6)
         .map(|v| format!("{v:.4}"))
         .collect();
-    if rec.rank_ratio.is_finite() {
+    if rec.completion.is_none() {
         eprintln!(
             "singular values: {} (σ4/σ3 = {:.4})",
             sv.join(" "),
             rec.rank_ratio
         );
     } else {
-        // With missing data the spectrum is that of the rank-3 completion: no σ4.
+        // With missing data the spectrum is that of the rank-3 completion: σ4/σ3 comes from
+        // the largest complete block.
         eprintln!(
-            "singular values of the completed matrix: {} (σ4/σ3 not defined)",
-            sv.join(" ")
+            "singular values of the completed matrix: {} (σ4/σ3 = {:.4} on {})",
+            sv.join(" "),
+            rec.rank_ratio,
+            rec.rank_ratio_source
         );
     }
     if let Some(r) = &rec.robust {
@@ -475,6 +482,9 @@ fn print_summary(rec: &Reconstruction, out: &Path) {
             k.principal_point_source,
             k.k1
         );
+    }
+    if let Some(sel) = &rec.model_selection {
+        eprintln!("camera model chosen: {}", sel.reason);
     }
     println!(
         "{} camera, {} frames, {} points, RMS {:.6} px → {}",
@@ -631,8 +641,8 @@ struct RunArgs {
     out: PathBuf,
     #[command(flatten)]
     opts: TrackOpts,
-    /// Camera model: orthographic, scaled-orthographic or projective.
-    #[arg(long, value_enum, default_value = "scaled-orthographic")]
+    /// Camera model.
+    #[arg(long, value_enum, default_value = "auto")]
     camera: CameraArg,
     /// Reconstruct from the tracks seen in every frame only (by default the partial
     /// tracks are used, through the missing-data solver).
@@ -861,7 +871,7 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
         #[cfg(feature = "rerun")]
         &a.record,
         false,
-        matches!(a.camera, CameraArg::Perspective),
+        matches!(a.camera, CameraArg::Perspective | CameraArg::Auto),
     )?;
     let mut table = tracked.table;
     let tracked_size = tracked.image_size;

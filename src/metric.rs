@@ -115,7 +115,10 @@ pub fn upgrade(
     let f = m_hat.nrows() / 2;
     let needed = match camera {
         CameraModel::Orthographic => 2,
-        CameraModel::ScaledOrthographic | CameraModel::Projective | CameraModel::Perspective => 3,
+        CameraModel::ScaledOrthographic
+        | CameraModel::Projective
+        | CameraModel::Perspective
+        | CameraModel::Auto => 3,
     };
     if f < needed {
         return Err(Error::TooFew {
@@ -155,7 +158,10 @@ pub fn upgrade(
                 b.push(0.0);
             }
         }
-        CameraModel::ScaledOrthographic | CameraModel::Projective | CameraModel::Perspective => {
+        CameraModel::ScaledOrthographic
+        | CameraModel::Projective
+        | CameraModel::Perspective
+        | CameraModel::Auto => {
             let mut norm = [0.0; 6];
             for (i, j) in &rows {
                 let ii = bilinear_row(i, i);

@@ -542,6 +542,154 @@ impl PerspectiveResult {
     }
 }
 
+/// The automatic choice between the scaled orthographic and the perspective camera.
+///
+/// Both are fitted to the same observations (`n` scalars). With `SS_a`, `SS_p` their sums
+/// of squared residuals and the noise variance estimated from the perspective fit,
+/// `σ² = SS_p / (n − k_p)` (`k_p = 6F + 3N + 1 − 7` parameters: poses, points, focal length,
+/// minus the similarity gauge), the perspective camera is kept when
+///
+/// ```text
+///   Δχ² = (SS_a − SS_p) / σ²  >  ln n,
+/// ```
+///
+/// the Bayesian information criterion for its one extra parameter (the scaled orthographic
+/// camera has 6 per frame, as the perspective pose; the focal length is the difference;
+/// Schwarz 1978). A perspective fit that failed keeps the affine camera.
+///
+/// Before that, the projective fit (made anyway) is tested the same way with its `5F − 8`
+/// extra parameters (`11F + 3N − 15` against `6F + 3N − 7`): when
+/// `(SS_a − SS_proj)/σ² ≤ (5F − 8) ln n` (σ² from the projective fit) no camera with
+/// perspective can explain the tracks significantly better, and the perspective stages are
+/// skipped. This saves their cost on affine-looking data, where the focal length of a
+/// perspective fit runs off to infinity (the weak-perspective limit) and its adjustment
+/// crawls along that valley.
+#[derive(Debug, Clone, Serialize)]
+pub struct ModelSelection {
+    pub chosen: CameraModel,
+    pub affine_rms_px: f64,
+    pub perspective_rms_px: Option<f64>,
+    pub perspective_focal_px: Option<f64>,
+    /// `σ` estimated from the perspective fit, pixels.
+    pub noise_sigma_px: f64,
+    pub delta_chi2: f64,
+    /// `ln n`.
+    pub threshold: f64,
+    pub reason: String,
+}
+
+impl ModelSelection {
+    /// The projective pre-test (see the type's documentation); `chosen` is perspective
+    /// when the test passes (the perspective stages then decide).
+    fn pretest(
+        affine_rms: f64,
+        projective_rms: f64,
+        n_obs: usize,
+        n_frames: usize,
+        n_points: usize,
+    ) -> Self {
+        let n = (2 * n_obs) as f64;
+        let extra = (5 * n_frames).saturating_sub(8).max(1) as f64;
+        let threshold = extra * n.max(1.0).ln();
+        let k = (11 * n_frames + 3 * n_points).saturating_sub(15) as f64;
+        let ss_a = affine_rms * affine_rms * n;
+        let ss_p = projective_rms * projective_rms * n;
+        let sigma2 = ss_p / (n - k).max(1.0);
+        let delta = if sigma2 > 0.0 {
+            (ss_a - ss_p) / sigma2
+        } else if ss_a > ss_p {
+            f64::INFINITY
+        } else {
+            0.0
+        };
+        let perspective = delta > threshold;
+        Self {
+            chosen: if perspective {
+                CameraModel::Perspective
+            } else {
+                CameraModel::ScaledOrthographic
+            },
+            affine_rms_px: affine_rms,
+            perspective_rms_px: None,
+            perspective_focal_px: None,
+            noise_sigma_px: sigma2.sqrt(),
+            delta_chi2: delta,
+            threshold,
+            reason: format!(
+                "scaled orthographic (no significant perspective) — the projective camera's \
+                 RMS {projective_rms:.4} px vs {affine_rms:.4} px: Δχ² = {delta:.1} ≤ (5F − 8) \
+                 ln n = {threshold:.1} (σ ≈ {:.3} px); the perspective stages were skipped",
+                sigma2.sqrt()
+            ),
+        }
+    }
+
+    fn judge(
+        affine_rms: f64,
+        persp: Option<&PerspectiveResult>,
+        n_obs: usize,
+        n_frames: usize,
+        n_points: usize,
+    ) -> Self {
+        let n = (2 * n_obs) as f64;
+        let threshold = n.max(1.0).ln();
+        let Some(p) = persp else {
+            return Self {
+                chosen: CameraModel::ScaledOrthographic,
+                affine_rms_px: affine_rms,
+                perspective_rms_px: None,
+                perspective_focal_px: None,
+                noise_sigma_px: f64::NAN,
+                delta_chi2: f64::NAN,
+                threshold,
+                reason: "scaled orthographic (the perspective fit failed)".into(),
+            };
+        };
+        let k = (6 * n_frames + 3 * n_points + 1).saturating_sub(7) as f64;
+        let ss_a = affine_rms * affine_rms * n;
+        let ss_p = p.rms_px * p.rms_px * n;
+        let sigma2 = ss_p / (n - k).max(1.0);
+        let delta = if sigma2 > 0.0 {
+            (ss_a - ss_p) / sigma2
+        } else if ss_a > ss_p {
+            f64::INFINITY
+        } else {
+            0.0
+        };
+        let perspective = delta > threshold;
+        let reason = format!(
+            "{} — perspective RMS {:.4} px (focal {:.0} px) vs scaled orthographic {:.4} px; \
+             Δχ² = {:.1} {} ln n = {:.1} (σ ≈ {:.3} px)",
+            if perspective {
+                "perspective"
+            } else {
+                "scaled orthographic (no significant perspective)"
+            },
+            p.rms_px,
+            p.intrinsics.focal_px,
+            affine_rms,
+            delta,
+            if perspective { ">" } else { "≤" },
+            threshold,
+            sigma2.sqrt()
+        );
+        Self {
+            chosen: if perspective {
+                CameraModel::Perspective
+            } else {
+                CameraModel::ScaledOrthographic
+            },
+            affine_rms_px: affine_rms,
+            perspective_rms_px: Some(p.rms_px),
+            perspective_focal_px: Some(p.intrinsics.focal_px),
+            noise_sigma_px: sigma2.sqrt(),
+            delta_chi2: delta,
+            threshold,
+            reason,
+        }
+    }
+}
+
 /// Input summary.
 #[derive(Debug, Clone, Serialize)]
 pub struct InputSummary {
@@ -563,7 +711,10 @@ pub struct StageTime {
 /// A metric reconstruction. Serializes to `reconstruction.json`.
 #[derive(Debug, Clone, Serialize)]
 pub struct Reconstruction {
+    /// The camera model of the result (with [`CameraModel::Auto`], the one chosen).
     pub camera_model: CameraModel,
+    /// With [`CameraModel::Auto`]: which camera was kept and why.
+    pub model_selection: Option<ModelSelection>,
     pub frames: Vec<FrameResult>,
     pub points: Vec<PointResult>,
     /// `sqrt(Σ_observed r² / #observed scalars)` of the final model, pixels: the projective
@@ -574,8 +725,12 @@ pub struct Reconstruction {
     pub metric_upgrade: MetricUpgrade,
     /// Every singular value the factorization computed, descending.
     pub singular_values: Vec<f64>,
-    /// σ4/σ3 (NaN when fewer than 4 singular values exist).
+    /// σ4/σ3 of the centred measurement matrix: of all tracks for complete data, else of
+    /// the largest complete block (consecutive frames × the tracks seen in all of them);
+    /// NaN when no block of 2 frames × 4 tracks exists.
     pub rank_ratio: f64,
+    /// What `rank_ratio` was computed on.
+    pub rank_ratio_source: String,
     pub factorization: FactorizationReport,
     /// Present when the table had missing entries.
     pub completion: Option<CompletionReport>,
@@ -867,6 +1022,8 @@ impl Reconstruction {
             refinement,
             mirrored,
             projective,
+            rank_ratio,
+            rank_source,
             warnings: fit_warnings,
             ..
         } = fitted;
@@ -885,14 +1042,6 @@ impl Reconstruction {
             ));
         }
         warnings.extend(fit_warnings);
-        let rank_ratio = {
-            let sv = &affine.singular_values;
-            if sv.len() >= 4 && sv[2] > 0.0 {
-                sv[3] / sv[2]
-            } else {
-                f64::NAN
-            }
-        };
         let affine_prediction = Mat::from_fn(affine.m_hat.nrows(), affine.s_hat.ncols(), |r, p| {
             let mut v = affine.t[r];
             for k in 0..affine.m_hat.ncols() {
@@ -922,41 +1071,110 @@ impl Reconstruction {
             points: vec![Vector3::repeat(f64::NAN); outlier_kept.len()],
         };
         outlier_model.triangulate(&outlier_meas);
-        let perspective = match (&projective, config.camera) {
-            (Some(pf), CameraModel::Perspective) => {
+        // With the automatic choice, a first test against the projective fit (already made):
+        // when even its 5F extra parameters do not explain the tracks significantly better
+        // than the scaled orthographic camera, the perspective stages are skipped.
+        let mut pre_selection = None;
+        if config.camera == CameraModel::Auto
+            && let Some(pf) = &projective
+        {
+            let sel = ModelSelection::pretest(
+                metric_rms_px,
+                pf.rms_px,
+                meas.n_observed(),
+                meas.n_frames(),
+                meas.n_points(),
+            );
+            if sel.chosen != CameraModel::Perspective {
+                pre_selection = Some(sel);
+            }
+        }
+        let perspective = match &projective {
+            Some(pf) if config.camera.is_perspective() && pre_selection.is_none() => {
                 let per = timer.run("perspective", |obs| {
                     perspective::fit(&meas, &pf.model, Some(&model), &config.perspective, 0, obs)
-                })?;
-                for st in &per.stages {
-                    if st.status == SolverStatus::Stalled {
+                });
+                let per = match per {
+                    Ok(p) => Some(p),
+                    // With the automatic choice the affine model stands in.
+                    Err(e) if config.camera == CameraModel::Auto => {
                         warnings.push(format!(
-                            "perspective stage {} stalled after {} iterations",
-                            st.stage, st.iterations
+                            "the perspective camera could not be fitted ({e}); the scaled \
+                             orthographic camera is kept"
                         ));
+                        None
                     }
-                }
-                if per.in_front < 0.95 {
-                    warnings.push(format!(
-                        "only {:.1} % of the observations are in front of their camera after \
+                    Err(e) => return Err(e),
+                };
+                per.map(|per| {
+                    for st in &per.stages {
+                        if st.status == SolverStatus::Stalled {
+                            warnings.push(format!(
+                                "perspective stage {} stalled after {} iterations",
+                                st.stage, st.iterations
+                            ));
+                        }
+                    }
+                    if per.in_front < 0.95 {
+                        warnings.push(format!(
+                            "only {:.1} % of the observations are in front of their camera after \
                          the Euclidean upgrade: the self-calibration is unreliable (weak \
                          perspective or degenerate motion)",
-                        100.0 * per.in_front
-                    ));
-                }
-                Some(PerspectiveResult::new(
-                    per,
-                    &config.perspective,
-                    &fit,
-                    &meas,
-                    &outlier_meas,
-                    &outlier_kept,
-                    &kept,
-                    &kept_tracks,
-                    &used_tracks,
-                ))
+                            100.0 * per.in_front
+                        ));
+                    }
+                    PerspectiveResult::new(
+                        per,
+                        &config.perspective,
+                        &fit,
+                        &meas,
+                        &outlier_meas,
+                        &outlier_kept,
+                        &kept,
+                        &kept_tracks,
+                        &used_tracks,
+                    )
+                })
             }
             _ => None,
         };
+        let mut perspective = perspective;
+        let mut projective = projective;
+        let mut camera_model = config.camera;
+        let mut model_selection = None;
+        if let Some(sel) = pre_selection {
+            camera_model = sel.chosen;
+            perspective = None;
+            projective = None;
+            model_selection = Some(sel);
+        } else if config.camera == CameraModel::Auto {
+            let sel = ModelSelection::judge(
+                metric_rms_px,
+                perspective.as_ref(),
+                meas.n_observed(),
+                meas.n_frames(),
+                meas.n_points(),
+            );
+            camera_model = sel.chosen;
+            if sel.chosen != CameraModel::Perspective {
+                perspective = None;
+                projective = None;
+            }
+            model_selection = Some(sel);
+        }
+        if let Some(p) = &perspective {
+            let side = p.intrinsics.image_size.map_or(
+                2.0 * p.intrinsics.principal_point[0].max(p.intrinsics.principal_point[1]),
+                |[w, h]| w.max(h) as f64,
+            );
+            if p.intrinsics.focal_px > 20.0 * side {
+                warnings.push(format!(
+                    "focal length {:.0} px, over 20 times the image size: the data are close \
+                     to weak perspective and the focal length is poorly determined",
+                    p.intrinsics.focal_px
+                ));
+            }
+        }
         let projective = projective.map(|pf| {
             ProjectiveResult::new(
                 pf,
@@ -1021,7 +1239,8 @@ impl Reconstruction {
         let outlier_tracks_input: Vec<usize> =
             outlier_kept.iter().map(|&p| kept_tracks[p]).collect();
         Ok(Reconstruction {
-            camera_model: config.camera,
+            camera_model,
+            model_selection,
             frames,
             points: points.into_iter().map(|(_, p)| p).collect(),
             rms_px: match (&perspective, &projective) {
@@ -1032,6 +1251,7 @@ impl Reconstruction {
             metric_rms_px,
             metric_upgrade: upgrade,
             rank_ratio,
+            rank_ratio_source: rank_source,
             singular_values: affine.singular_values,
             factorization: affine.report,
             completion: completion_report,
@@ -1144,6 +1364,9 @@ struct Fitted {
     refinement: Option<RefinementReport>,
     mirrored: bool,
     projective: Option<projective::ProjectiveFit>,
+    /// σ4/σ3 and what it was computed on.
+    rank_ratio: f64,
+    rank_source: String,
     warnings: Vec<String>,
 }
 
@@ -1219,15 +1442,28 @@ fn fit_selection(
         ));
     }
     let sv = &affine.singular_values;
-    let rank_ratio = if sv.len() >= 4 && sv[2] > 0.0 {
-        sv[3] / sv[2]
+    let (rank_ratio, rank_source) = if sv.len() >= 4 && sv[2] > 0.0 {
+        (sv[3] / sv[2], "all tracks".to_string())
     } else {
-        f64::NAN
+        match complete_block_rank_ratio(&meas, &config.svd) {
+            Some((r, nf, np, f0)) => (
+                r,
+                format!(
+                    "the largest complete block: {nf} consecutive frames from frame {f0} × {np} \
+                     tracks"
+                ),
+            ),
+            None => (
+                f64::NAN,
+                "not defined (no complete block of 2 frames × 4 tracks)".into(),
+            ),
+        }
     };
     if rank_ratio > config.rank3_warning_ratio && config.camera.is_affine() {
         warnings.push(format!(
-            "σ4/σ3 = {rank_ratio:.3} > {}: the tracks are far from rank 3 (strong \
-             perspective, non-rigid or independently moving objects, or outlier tracks)",
+            "σ4/σ3 = {rank_ratio:.3} > {} (on {rank_source}): the tracks are far from rank 3 \
+             (strong perspective, non-rigid or independently moving objects, or outlier \
+             tracks)",
             config.rank3_warning_ratio
         ));
     }
@@ -1311,8 +1547,68 @@ fn fit_selection(
         refinement,
         mirrored,
         projective,
+        rank_ratio,
+        rank_source,
         warnings,
     })
+}
+
+/// σ4/σ3 of the largest complete block of a partial table: a window of consecutive (fit)
+/// frames and the tracks seen in all of them, centred. Windows of `F`, 40, 20, 10 and 5
+/// frames (those not longer than `F`) are slid by a quarter of their length; the block with
+/// the most observations (at least 2 frames × 4 tracks) wins. Returns `(ratio, frames,
+/// tracks, first frame)`. The rank diagnostic of complete data, made available to partial
+/// tracks (a video's): a rank-3 completion has no σ4. Cost `O(F · N)` per window length for
+/// the counts (prefix sums per track), plus one truncated SVD of the block.
+fn complete_block_rank_ratio(
+    meas: &Measurements,
+    svd_cfg: &TruncatedSvdConfig,
+) -> Option<(f64, usize, usize, usize)> {
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    // prefix[p][f] = observations of track p in frames < f.
+    let mut prefix = vec![0u32; np * (nf + 1)];
+    for p in 0..np {
+        for f in 0..nf {
+            prefix[p * (nf + 1) + f + 1] =
+                prefix[p * (nf + 1) + f] + u32::from(meas.is_visible(f, p));
+        }
+    }
+    let mut best: Option<(usize, usize, usize)> = None; // (observations, start, len)
+    for len in [nf, 40, 20, 10, 5] {
+        if len > nf || len < 2 {
+            continue;
+        }
+        let step = (len / 4).max(1);
+        let mut start = 0;
+        loop {
+            let n = (0..np)
+                .filter(|&p| {
+                    prefix[p * (nf + 1) + start + len] - prefix[p * (nf + 1) + start] == len as u32
+                })
+                .count();
+            if n >= 4 && best.is_none_or(|b| n * len > b.0) {
+                best = Some((n * len, start, len));
+            }
+            if start + len >= nf {
+                break;
+            }
+            start = (start + step).min(nf - len);
+        }
+    }
+    let (_, f0, len) = best?;
+    let tracks: Vec<usize> = (0..np)
+        .filter(|&p| prefix[p * (nf + 1) + f0 + len] - prefix[p * (nf + 1) + f0] == len as u32)
+        .collect();
+    let rows = 2 * len;
+    let mean: Vec<f64> = (0..rows)
+        .map(|r| tracks.iter().map(|&p| meas.w[(2 * f0 + r, p)]).sum::<f64>() / tracks.len() as f64)
+        .collect();
+    let block = Mat::from_fn(rows, tracks.len(), |r, k| {
+        meas.w[(2 * f0 + r, tracks[k])] - mean[r]
+    });
+    let svd = svd::truncated_svd(block.as_ref(), 4, svd_cfg).ok()?;
+    let s = &svd.s;
+    (s.len() >= 4 && s[2] > 0.0).then(|| (s[3] / s[2], len, tracks.len(), f0))
 }
 
 /// Refits the projective verdict may ask for (each a full fit of the new selection).
@@ -1606,7 +1902,8 @@ fn initial_model(
             CameraModel::Orthographic => 1.0,
             CameraModel::ScaledOrthographic
             | CameraModel::Projective
-            | CameraModel::Perspective => s,
+            | CameraModel::Perspective
+            | CameraModel::Auto => s,
         });
         translations.push(Vector2::new(affine.t[2 * k], affine.t[2 * k + 1]));
     }

@@ -373,6 +373,8 @@ pub fn send_layout(rec: &RecordingStream, parts: LayoutParts) -> RecordingResult
                 .with_origin("/world")
                 .into(),
         );
+    }
+    if parts.reconstruction {
         scene.push(
             Spatial3DView::new("affine structure")
                 .with_origin("/affine")

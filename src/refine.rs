@@ -671,7 +671,10 @@ fn refine_impl(
     let start = Instant::now();
     let c = match camera {
         CameraModel::Orthographic => 5,
-        CameraModel::ScaledOrthographic | CameraModel::Projective | CameraModel::Perspective => 6,
+        CameraModel::ScaledOrthographic
+        | CameraModel::Projective
+        | CameraModel::Perspective
+        | CameraModel::Auto => 6,
     };
     let st = Structure::new(meas);
     let n_scalars = 2 * st.frame.len();
@@ -848,7 +851,8 @@ mod tests {
                 CameraModel::Orthographic => 1.0,
                 CameraModel::ScaledOrthographic
                 | CameraModel::Projective
-                | CameraModel::Perspective => rng.random_range(0.8..1.2),
+                | CameraModel::Perspective
+                | CameraModel::Auto => rng.random_range(0.8..1.2),
             })
             .collect();
         let points = (0..n)

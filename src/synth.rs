@@ -369,6 +369,14 @@ impl SynthScene {
 }
 
 fn check(cfg: &SynthConfig) -> Result<()> {
+    if cfg.camera == CameraModel::Auto {
+        return Err(Error::InvalidConfig {
+            field: "camera",
+            message: "a synthetic scene needs a definite camera (orthographic, \
+                      scaled-orthographic or perspective), not auto"
+                .into(),
+        });
+    }
     let bad = |field: &'static str, message: String| Err(Error::InvalidConfig { field, message });
     if cfg.frames < 3 {
         return bad("frames", format!("{} < 3", cfg.frames));
@@ -497,7 +505,7 @@ fn camera_motion(cfg: &SynthConfig) -> (Vec<Rotation3<f64>>, Vec<f64>, Vec<Vecto
             // The camera comes closer and goes back: magnification 1 → 1.3 → 1.
             CameraModel::ScaledOrthographic => 1.0 + 0.3 * (std::f64::consts::PI * a).sin(),
             // Replaced by the weak-perspective scale in `perspective_cameras`.
-            CameraModel::Projective | CameraModel::Perspective => 1.0,
+            CameraModel::Projective | CameraModel::Perspective | CameraModel::Auto => 1.0,
         });
         trans.push(Vector2::new(320.0 + 40.0 * a, 240.0 - 25.0 * a));
     }

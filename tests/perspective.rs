@@ -174,3 +174,56 @@ fn bad_intrinsics_are_config_errors() {
         }
     }
 }
+
+/// `CameraModel::Auto` keeps the perspective camera on strong-perspective scenes and an
+/// affine one on affine scenes, and says why.
+#[test]
+fn auto_picks_perspective_only_when_the_data_show_it() {
+    let strong = scene(2.0, 0.3, 0.5, 6);
+    let affine = generate(&SynthConfig {
+        camera: CameraModel::ScaledOrthographic,
+        shape: Shape::House,
+        frames: 14,
+        points: 60,
+        noise: 0.5,
+        missing: 0.3,
+        seed: 6,
+        ..SynthConfig::default()
+    })
+    .unwrap();
+    let cfg = Config {
+        camera: CameraModel::Auto,
+        ..Config::default()
+    };
+    let a = Reconstruction::from_tracks(&strong.table, &cfg).unwrap();
+    let sel = a.model_selection.as_ref().unwrap();
+    assert_eq!(a.camera_model, CameraModel::Perspective, "{}", sel.reason);
+    assert!(sel.delta_chi2 > sel.threshold);
+    assert!(a.perspective.is_some());
+    let b = Reconstruction::from_tracks(&affine.table, &cfg).unwrap();
+    let sel = b.model_selection.as_ref().unwrap();
+    assert_eq!(
+        b.camera_model,
+        CameraModel::ScaledOrthographic,
+        "{}",
+        sel.reason
+    );
+    assert!(b.perspective.is_none() && b.projective.is_none());
+}
+
+/// With partial tracks σ4/σ3 comes from the largest complete block, so the rank warning of
+/// the affine cameras can fire on a video-like table; strong perspective is far from rank 3.
+#[test]
+fn rank_diagnostic_is_defined_for_partial_tracks() {
+    let s = scene(2.0, 0.3, 0.0, 8);
+    assert!(!s.table.is_complete());
+    let cfg = Config {
+        camera: CameraModel::ScaledOrthographic,
+        robust: None,
+        ..Config::default()
+    };
+    let rec = Reconstruction::from_tracks(&s.table, &cfg).unwrap();
+    assert!(rec.rank_ratio.is_finite(), "{}", rec.rank_ratio_source);
+    assert!(rec.rank_ratio_source.contains("complete block"));
+    assert!(rec.rank_ratio > 0.01, "σ4/σ3 = {}", rec.rank_ratio);
+}
