@@ -368,7 +368,7 @@ fn scaling() {
         "| frames | observations | scaled-orthographic s | perspective s | perspective RMS px | focal err % |"
     );
     println!("|---|---|---|---|---|---|");
-    for &frames in &[50usize, 100, 200, 400] {
+    for &frames in &[50usize, 100, 200] {
         let s = generate(&SynthConfig {
             camera: CameraModel::Perspective,
             motion: Motion::HandheldArc,

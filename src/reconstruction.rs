@@ -1515,11 +1515,23 @@ fn fit_selection(
             s: affine.s_hat.as_ref(),
             t: &affine.t,
         };
+        // For the perspective camera the projective model only prepares the perspective
+        // stages: its adjustment is capped.
+        let mut pcfg = config.projective.clone();
+        if config.camera.is_perspective() {
+            pcfg.refine.max_iterations = pcfg
+                .refine
+                .max_iterations
+                .min(config.perspective.projective_iterations.max(1));
+        }
         let pf = timer.run("projective", |obs| {
-            projective::fit(&meas, start, &config.projective, 0, obs)
+            projective::fit(&meas, start, &pcfg, 0, obs)
         })?;
         for st in &pf.stages {
-            if st.status != SolverStatus::Converged && st.stage != "sturm-triggs" {
+            if st.status != SolverStatus::Converged
+                && st.stage != "sturm-triggs"
+                && !config.camera.is_perspective()
+            {
                 warnings.push(format!(
                     "projective stage {} ended with status {:?} after {} iterations",
                     st.stage, st.status, st.iterations
