@@ -1295,5 +1295,20 @@ fn reconstruct_recorded_perspective_frustums() {
         1
     );
     assert!(p.intrinsics.focal_px > 0.0);
+    // The viewer's own loader accepts the pinholes and frustums (when the CLI is there).
+    if let Some(bin) = rerun_cli() {
+        let out = std::process::Command::new(&bin)
+            .args(["rrd", "verify"])
+            .arg(&path)
+            .env("RERUN_ANALYTICS", "0")
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "rerun rrd verify failed:\n{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
     std::fs::remove_dir_all(&dir).ok();
 }
