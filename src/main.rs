@@ -257,7 +257,7 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         "rank3",
         rank3::recording::LayoutParts {
             reconstruction: true,
-            perspective: matches!(a.camera, CameraArg::Perspective | CameraArg::Auto),
+            perspective: matches!(a.camera, CameraArg::Perspective),
             ..Default::default()
         },
     )?;
@@ -277,11 +277,46 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     let config = a.opts.config(a.camera, None);
     #[cfg(feature = "rerun")]
     let rec = rank3::recording::reconstruct_recorded(recording.as_ref(), t, &config)?;
+    #[cfg(feature = "rerun")]
+    show_perspective_layout(
+        recording.as_ref(),
+        &rec,
+        a.camera,
+        rank3::recording::LayoutParts {
+            reconstruction: true,
+            ..Default::default()
+        },
+    )?;
     #[cfg(not(feature = "rerun"))]
     let rec = Reconstruction::from_tracks(t, &config)?;
     rank3::output::write_all(&rec, &a.out)?;
     write_colmap(&rec, t, &a.out)?;
     print_summary(&rec, &a.out);
+    Ok(())
+}
+
+/// With `--camera auto` the layout sent when the recording opened has no perspective views
+/// (the camera was not chosen yet); when the perspective camera was chosen, the layout is
+/// sent again with its structure beside the affine model's.
+#[cfg(feature = "rerun")]
+fn show_perspective_layout(
+    recording: Option<&rerun::RecordingStream>,
+    rec: &Reconstruction,
+    camera: CameraArg,
+    parts: rank3::recording::LayoutParts,
+) -> Result<(), rank3::Error> {
+    if let Some(r) = recording
+        && matches!(camera, CameraArg::Auto)
+        && rec.perspective.is_some()
+    {
+        rank3::recording::send_layout(
+            r,
+            rank3::recording::LayoutParts {
+                perspective: true,
+                ..parts
+            },
+        )?;
+    }
     Ok(())
 }
 
@@ -871,7 +906,7 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
         #[cfg(feature = "rerun")]
         &a.record,
         false,
-        matches!(a.camera, CameraArg::Perspective | CameraArg::Auto),
+        matches!(a.camera, CameraArg::Perspective),
     )?;
     let mut table = tracked.table;
     let tracked_size = tracked.image_size;
@@ -908,6 +943,17 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
     let rec = Reconstruction::from_tracks_observed(&table, &config, &mut obs);
     spinner.finish_and_clear();
     let rec = rec?;
+    #[cfg(feature = "rerun")]
+    show_perspective_layout(
+        recording.as_ref(),
+        &rec,
+        a.camera,
+        rank3::recording::LayoutParts {
+            tracking: true,
+            reconstruction: true,
+            ..Default::default()
+        },
+    )?;
     rank3::output::write_all(&rec, &a.out)?;
     write_colmap(&rec, &table, &a.out)?;
     print_summary(&rec, &a.out);

@@ -469,36 +469,19 @@ impl PerspectiveResult {
                 }
             })
             .collect();
-        let mut points: Vec<(usize, PointResult)> = Vec::new();
-        for (p, &input_p) in used_tracks.iter().enumerate() {
-            let (ss, n) = point_residuals(&fitted, meas, p);
-            let x = model.points[p];
-            points.push((
-                input_p,
-                PointResult {
-                    track: fit.track_ids()[p].clone(),
-                    xyz: [x[0], x[1], x[2]],
-                    inlier: true,
-                    rms_px: rms_of(ss, n),
-                    n_observations: n,
-                },
-            ));
-        }
-        for (k, &p) in outlier_kept.iter().enumerate() {
-            let (ss, n) = point_residuals(&outliers, outlier_meas, k);
-            let x = outlier_points[k];
-            points.push((
-                kept_tracks[p],
-                PointResult {
-                    track: kept.track_ids()[p].clone(),
-                    xyz: [x[0], x[1], x[2]],
-                    inlier: false,
-                    rms_px: rms_of(ss, n),
-                    n_observations: n,
-                },
-            ));
-        }
-        points.sort_by_key(|(i, _)| *i);
+        let points = point_results(
+            &TrackSets {
+                fit,
+                meas,
+                used_tracks,
+                kept,
+                kept_tracks,
+                outlier_kept,
+                outlier_meas,
+            },
+            (&fitted, |p| model.points[p]),
+            (&outliers, |k| outlier_points[k]),
+        );
         let mut focals = model.focal_px.clone();
         focals.sort_by(f64::total_cmp);
         let k0 = model.k(0);
@@ -533,7 +516,7 @@ impl PerspectiveResult {
             starts: pf.starts,
             stages: pf.stages,
             cameras,
-            points: points.into_iter().map(|(_, p)| p).collect(),
+            points,
             downweighted,
             in_front: pf.in_front,
             model,
@@ -1205,44 +1188,28 @@ impl Reconstruction {
                 }
             })
             .collect();
-        // Points in the input's track order: fitted tracks, then outliers interleaved.
-        let mut points: Vec<(usize, PointResult)> = Vec::with_capacity(used_tracks.len());
-        for (p, &input_p) in used_tracks.iter().enumerate() {
-            let (ss, n) = point_residuals(&metric_predictor(&model), &meas, p);
-            let x = model.points[p];
-            points.push((
-                input_p,
-                PointResult {
-                    track: fit.track_ids()[p].clone(),
-                    xyz: [x[0], x[1], x[2]],
-                    inlier: true,
-                    rms_px: rms_of(ss, n),
-                    n_observations: n,
-                },
-            ));
-        }
-        for (k, &p) in outlier_kept.iter().enumerate() {
-            let (ss, n) = point_residuals(&metric_predictor(&outlier_model), &outlier_meas, k);
-            let x = outlier_model.points[k];
-            points.push((
-                kept_tracks[p],
-                PointResult {
-                    track: kept.track_ids()[p].clone(),
-                    xyz: [x[0], x[1], x[2]],
-                    inlier: false,
-                    rms_px: rms_of(ss, n),
-                    n_observations: n,
-                },
-            ));
-        }
-        points.sort_by_key(|(i, _)| *i);
+        let points = point_results(
+            &TrackSets {
+                fit: &fit,
+                meas: &meas,
+                used_tracks: &used_tracks,
+                kept: &kept,
+                kept_tracks: &kept_tracks,
+                outlier_kept: &outlier_kept,
+                outlier_meas: &outlier_meas,
+            },
+            (&metric_predictor(&model), |p| model.points[p]),
+            (&metric_predictor(&outlier_model), |k| {
+                outlier_model.points[k]
+            }),
+        );
         let outlier_tracks_input: Vec<usize> =
             outlier_kept.iter().map(|&p| kept_tracks[p]).collect();
         Ok(Reconstruction {
             camera_model,
             model_selection,
             frames,
-            points: points.into_iter().map(|(_, p)| p).collect(),
+            points,
             rms_px: match (&perspective, &projective) {
                 (Some(p), _) => p.rms_px,
                 (None, Some(p)) => p.rms_px,
@@ -1730,6 +1697,61 @@ fn point_residuals(
     p: usize,
 ) -> (f64, usize) {
     residual_sum(predict, meas, (0..meas.n_frames()).map(|f| (f, p)))
+}
+
+/// The fit's tracks and the outlier tracks, as the result blocks list them.
+struct TrackSets<'a> {
+    fit: &'a TrackTable,
+    meas: &'a Measurements,
+    /// Input index of each fit track.
+    used_tracks: &'a [usize],
+    kept: &'a TrackTable,
+    /// Input index of each kept track.
+    kept_tracks: &'a [usize],
+    /// Kept-table indices of the outlier tracks.
+    outlier_kept: &'a [usize],
+    outlier_meas: &'a Measurements,
+}
+
+/// Point results in the input's track order: the fit's tracks and the outlier tracks
+/// interleaved, each with its 3D point (`(predictor, xyz)` of the fit's tracks and of the
+/// outlier tracks) and its reprojection RMS.
+fn point_results(
+    t: &TrackSets<'_>,
+    fitted: (
+        &impl Fn(usize, usize) -> [f64; 2],
+        impl Fn(usize) -> Vector3<f64>,
+    ),
+    outliers: (
+        &impl Fn(usize, usize) -> [f64; 2],
+        impl Fn(usize) -> Vector3<f64>,
+    ),
+) -> Vec<PointResult> {
+    let result = |track: Id, x: Vector3<f64>, inlier: bool, (ss, n): (f64, usize)| PointResult {
+        track,
+        xyz: [x[0], x[1], x[2]],
+        inlier,
+        rms_px: rms_of(ss, n),
+        n_observations: n,
+    };
+    let mut points: Vec<(usize, PointResult)> =
+        Vec::with_capacity(t.used_tracks.len() + t.outlier_kept.len());
+    for (p, &input_p) in t.used_tracks.iter().enumerate() {
+        let r = point_residuals(fitted.0, t.meas, p);
+        points.push((
+            input_p,
+            result(t.fit.track_ids()[p].clone(), fitted.1(p), true, r),
+        ));
+    }
+    for (k, &p) in t.outlier_kept.iter().enumerate() {
+        let r = point_residuals(outliers.0, t.outlier_meas, k);
+        points.push((
+            t.kept_tracks[p],
+            result(t.kept.track_ids()[p].clone(), outliers.1(k), false, r),
+        ));
+    }
+    points.sort_by_key(|(i, _)| *i);
+    points.into_iter().map(|(_, p)| p).collect()
 }
 
 /// [`MetricModel::project`] as a predictor for [`residual_sum`].
