@@ -1476,7 +1476,19 @@ fn fit_selection(
     refine::fix_gauge(&mut model, affine_camera);
     let mirrored = metric::apply_necker_convention(&mut model);
 
-    let projective = if config.camera.is_projective() {
+    // With the automatic choice, a table the projective stages cannot use (a frame with
+    // fewer than 6 tracks, …) keeps the affine camera.
+    let projective_usable = match projective::check_observations(&meas) {
+        Err(e) if config.camera == CameraModel::Auto => {
+            warnings.push(format!(
+                "camera auto: the perspective camera was not tried ({e}); the scaled \
+                 orthographic camera is kept"
+            ));
+            false
+        }
+        _ => true,
+    };
+    let projective = if config.camera.is_projective() && projective_usable {
         let start = projective::AffineStart {
             m: affine.m_hat.as_ref(),
             s: affine.s_hat.as_ref(),
@@ -1634,7 +1646,9 @@ fn min_points_per_frame(config: &Config, complete: bool) -> usize {
     if !complete {
         m = m.max(4);
     }
-    if config.camera.is_projective() {
+    // The automatic choice keeps every frame the affine camera can use: where the projective
+    // stages lack tracks it keeps the affine camera instead (`fit_selection`).
+    if config.camera.is_projective() && config.camera != CameraModel::Auto {
         m = m.max(6);
     }
     m

@@ -227,3 +227,33 @@ fn rank_diagnostic_is_defined_for_partial_tracks() {
     assert!(rec.rank_ratio_source.contains("complete block"));
     assert!(rec.rank_ratio > 0.01, "σ4/σ3 = {}", rec.rank_ratio);
 }
+
+/// A frame with too few tracks for the projective stages (4 < 6) is kept by the automatic
+/// choice, which then keeps the affine camera and says why, rather than setting it aside.
+#[test]
+fn auto_keeps_frames_the_projective_stages_cannot_use() {
+    let mut s = generate(&SynthConfig {
+        camera: CameraModel::ScaledOrthographic,
+        frames: 8,
+        points: 30,
+        noise: 0.3,
+        seed: 9,
+        ..SynthConfig::default()
+    })
+    .unwrap();
+    for p in 4..s.table.n_tracks() {
+        s.table.unset(0, p);
+    }
+    let cfg = Config {
+        camera: CameraModel::Auto,
+        ..Config::default()
+    };
+    let rec = Reconstruction::from_tracks(&s.table, &cfg).unwrap();
+    assert_eq!(rec.kept_frames.len(), 8, "{:?}", rec.set_aside);
+    assert_eq!(rec.camera_model, CameraModel::ScaledOrthographic);
+    assert!(
+        rec.warnings.iter().any(|w| w.contains("not tried")),
+        "{:?}",
+        rec.warnings
+    );
+}
