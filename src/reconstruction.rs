@@ -625,7 +625,9 @@ impl ModelSelection {
                 noise_sigma_px: f64::NAN,
                 delta_chi2: f64::NAN,
                 threshold,
-                reason: "scaled orthographic (the perspective fit failed)".into(),
+                reason: "scaled orthographic (the perspective camera could not be tried or \
+                         fitted; the warnings say why)"
+                    .into(),
             };
         };
         let k = (6 * n_frames + 3 * n_points + 1).saturating_sub(7) as f64;
