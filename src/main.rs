@@ -521,12 +521,22 @@ fn print_summary(rec: &Reconstruction, out: &Path) {
     if let Some(sel) = &rec.model_selection {
         eprintln!("camera model chosen: {}", sel.reason);
     }
+    let fitted = rec.points.iter().filter(|p| p.inlier).count();
+    let outliers = rec.points.len() - fitted;
     println!(
-        "{} camera, {} frames, {} points, RMS {:.6} px → {}",
+        "{} camera, {} frames, {fitted} points fitted{}, RMS {:.6} px{} → {}",
         rec.camera_model,
         rec.frames.len(),
-        rec.points.len(),
+        if outliers > 0 {
+            format!(" ({outliers} outlier tracks left out)")
+        } else {
+            String::new()
+        },
         rec.rms_px,
+        rec.perspective.as_ref().map_or(String::new(), |p| format!(
+            ", focal {:.1} px",
+            p.intrinsics.focal_px
+        )),
         out.display()
     );
 }
