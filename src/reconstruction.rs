@@ -561,6 +561,23 @@ pub struct ModelSelection {
     pub reason: String,
 }
 
+/// `(Δχ², σ²)` of a richer model against the affine one over `n` scalars: `σ² = SS_r /
+/// (n − k)` from the richer model's fit (`k` its parameters, gauge removed) and
+/// `Δχ² = (SS_a − SS_r) / σ²`, with `SS = rms² n`.
+fn delta_chi2(affine_rms: f64, richer_rms: f64, n: f64, k: usize) -> (f64, f64) {
+    let ss_a = affine_rms * affine_rms * n;
+    let ss_r = richer_rms * richer_rms * n;
+    let sigma2 = ss_r / (n - k as f64).max(1.0);
+    let delta = if sigma2 > 0.0 {
+        (ss_a - ss_r) / sigma2
+    } else if ss_a > ss_r {
+        f64::INFINITY
+    } else {
+        0.0
+    };
+    (delta, sigma2)
+}
+
 impl ModelSelection {
     /// The projective pre-test (see the type's documentation); `chosen` is perspective
     /// when the test passes (the perspective stages then decide).
@@ -574,17 +591,8 @@ impl ModelSelection {
         let n = (2 * n_obs) as f64;
         let extra = (5 * n_frames).saturating_sub(8).max(1) as f64;
         let threshold = extra * n.max(1.0).ln();
-        let k = (11 * n_frames + 3 * n_points).saturating_sub(15) as f64;
-        let ss_a = affine_rms * affine_rms * n;
-        let ss_p = projective_rms * projective_rms * n;
-        let sigma2 = ss_p / (n - k).max(1.0);
-        let delta = if sigma2 > 0.0 {
-            (ss_a - ss_p) / sigma2
-        } else if ss_a > ss_p {
-            f64::INFINITY
-        } else {
-            0.0
-        };
+        let k = 11 * n_frames + 3 * n_points;
+        let (delta, sigma2) = delta_chi2(affine_rms, projective_rms, n, k.saturating_sub(15));
         let perspective = delta > threshold;
         Self {
             chosen: if perspective {
@@ -630,17 +638,8 @@ impl ModelSelection {
                     .into(),
             };
         };
-        let k = (6 * n_frames + 3 * n_points + 1).saturating_sub(7) as f64;
-        let ss_a = affine_rms * affine_rms * n;
-        let ss_p = p.rms_px * p.rms_px * n;
-        let sigma2 = ss_p / (n - k).max(1.0);
-        let delta = if sigma2 > 0.0 {
-            (ss_a - ss_p) / sigma2
-        } else if ss_a > ss_p {
-            f64::INFINITY
-        } else {
-            0.0
-        };
+        let k = 6 * n_frames + 3 * n_points + 1;
+        let (delta, sigma2) = delta_chi2(affine_rms, p.rms_px, n, k.saturating_sub(7));
         let perspective = delta > threshold;
         let reason = format!(
             "{} — perspective RMS {:.4} px (focal {:.0} px) vs scaled orthographic {:.4} px; \

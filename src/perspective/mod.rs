@@ -127,6 +127,12 @@ impl Default for PerspectiveConfig {
 }
 
 impl PerspectiveConfig {
+    /// Whether the adjustment estimates the principal point: when asked to, and always when
+    /// neither it nor the image size is known (the tracks' bounding box is only a guess).
+    pub fn estimates_principal_point(&self, assumed: &Assumed) -> bool {
+        self.estimate_principal_point || assumed.principal_point_source == "track bounding box"
+    }
+
     /// Checks every field; [`Error::InvalidConfig`] names the first bad one.
     pub fn validate(&self) -> Result<()> {
         let bad =
@@ -284,7 +290,8 @@ pub struct Assumed {
 /// The principal point and scale of the upgrade: given, else the image size's, else the
 /// observations' bounding box.
 pub fn assumed_frame(meas: &Measurements, k: &Intrinsics) -> Assumed {
-    let bbox = || {
+    let Some([w, h]) = k.image_size else {
+        // Without the image size, the observations' bounding box stands in for it.
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         for (f, p) in meas.observed_pairs() {
             for d in 0..2 {
@@ -293,31 +300,30 @@ pub fn assumed_frame(meas: &Measurements, k: &Intrinsics) -> Assumed {
                 hi[d] = hi[d].max(v);
             }
         }
-        (lo, hi)
+        let side = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1.0);
+        let (pp, source) = match k.principal_point {
+            Some(c) => (c, "given"),
+            None => (
+                [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0],
+                "track bounding box",
+            ),
+        };
+        return Assumed {
+            principal_point: pp,
+            principal_point_source: source,
+            scale: k.focal_px.unwrap_or(side),
+        };
     };
-    let (pp, source) = match (k.principal_point, k.image_size) {
-        (Some(c), _) => (c, "given"),
+    let (pp, source) = match k.principal_point {
+        Some(c) => (c, "given"),
         // Pixel centres at integer coordinates (rank3's tracker): the centre of a W×H
         // image is ((W − 1)/2, (H − 1)/2).
-        (None, Some([w, h])) => (
+        None => (
             [(w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0],
             "image centre",
         ),
-        (None, None) => {
-            let (lo, hi) = bbox();
-            (
-                [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0],
-                "track bounding box",
-            )
-        }
     };
-    let side = match k.image_size {
-        Some([w, h]) => w.max(h) as f64,
-        None => {
-            let (lo, hi) = bbox();
-            (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1.0)
-        }
-    };
+    let side = w.max(h) as f64;
     Assumed {
         principal_point: pp,
         principal_point_source: source,
@@ -482,19 +488,17 @@ pub fn fit(
             max_iterations: cfg.screen_iterations.max(1),
             ..cfg.bundle.clone()
         },
-        estimate_principal_point: false,
         distortion: false,
         ..cfg.clone()
     };
-    let mut screen_assumed = assumed;
-    screen_assumed.principal_point_source = "given";
     let mut best: Option<(usize, f64, PerspectiveModel)> = None;
     for (i, (report, start)) in starts.iter_mut().enumerate() {
         let screened = adjust_from(
             meas,
             start.clone(),
             &screen_cfg,
-            &screen_assumed,
+            &assumed,
+            false,
             run,
             &mut crate::NoopObserver,
         );
@@ -513,7 +517,8 @@ pub fn fit(
         });
     };
     starts[chosen].0.chosen = true;
-    let mut out = adjust_from(meas, start, cfg, &assumed, run, observer)?;
+    let estimate_pp = cfg.estimates_principal_point(&assumed);
+    let mut out = adjust_from(meas, start, cfg, &assumed, estimate_pp, run, observer)?;
     out.selfcal = selfcal_report;
     out.starts = starts.into_iter().map(|(r, _)| r).collect();
     Ok(out)
@@ -590,20 +595,39 @@ pub fn adjust(
     }
     let mut assumed = assumed_frame(meas, &cfg.intrinsics);
     assumed.principal_point = start.principal_point;
-    adjust_from(meas, start.clone(), cfg, &assumed, run, observer)
+    let estimate_pp = cfg.estimates_principal_point(&assumed);
+    adjust_from(
+        meas,
+        start.clone(),
+        cfg,
+        &assumed,
+        estimate_pp,
+        run,
+        observer,
+    )
 }
 
 /// The adjustment stages, in normalised units `ŵ = (w − c)/s` (`c` the assumed principal
-/// point, `s` the assumed scale).
+/// point, `s` the assumed scale); a second stage frees the principal point when
+/// `estimate_pp`, and `k₁` when `cfg.distortion`.
+#[allow(clippy::too_many_arguments)]
 fn adjust_from(
     meas: &Measurements,
     start: PerspectiveModel,
     cfg: &PerspectiveConfig,
     assumed: &Assumed,
+    estimate_pp: bool,
     run: usize,
     observer: &mut dyn Observer,
 ) -> Result<PerspectiveFit> {
     let (nf, np) = (meas.n_frames(), meas.n_points());
+    if nf < 2 {
+        return Err(Error::TooFew {
+            what: "frames for a metric bundle adjustment",
+            needed: 2,
+            have: nf,
+        });
+    }
     let s = assumed.scale;
     let known_focal = cfg.intrinsics.focal_px.is_some();
     let obs: Vec<(usize, usize)> = meas.observed_pairs().collect();
@@ -675,8 +699,6 @@ fn adjust_from(
             &mut stages,
         )?
         .report;
-    let estimate_pp =
-        cfg.estimate_principal_point || assumed.principal_point_source == "track bounding box";
     if estimate_pp || cfg.distortion {
         let (f_now, _, k_now) = metric.intrinsics(&cams[..cl], &glob);
         let free = Metric {
@@ -789,21 +811,17 @@ fn to_pixels(
         points.iter_mut().for_each(|x| *x /= spread);
         translations.iter_mut().for_each(|t| *t /= spread);
     }
-    let mut focal_px = Vec::with_capacity(nf);
-    let mut c = a.principal_point;
-    let mut k1 = 0.0;
-    for f in 0..nf {
-        let (fo, cn, k) = m.intrinsics(&cams[f * cl..(f + 1) * cl], glob);
-        focal_px.push(fo * s);
-        c = [
-            a.principal_point[0] + s * cn[0],
-            a.principal_point[1] + s * cn[1],
-        ];
-        k1 = k;
-    }
+    let focal_px = (0..nf)
+        .map(|f| m.intrinsics(&cams[f * cl..(f + 1) * cl], glob).0 * s)
+        .collect();
+    // The principal point and k₁ are shared by every frame.
+    let (_, cn, k1) = m.intrinsics(&cams[..cl], glob);
     PerspectiveModel {
         focal_px,
-        principal_point: c,
+        principal_point: [
+            a.principal_point[0] + s * cn[0],
+            a.principal_point[1] + s * cn[1],
+        ],
         k1,
         rotations,
         translations,
