@@ -1684,16 +1684,9 @@ fn log_perspective(
 fn perspective_markdown(p: &crate::reconstruction::PerspectiveResult) -> String {
     let k = &p.intrinsics;
     let mut s = format!(
-        "# Perspective reconstruction
-
-RMS {:.6} px; {:.1} % of the observations in front of          their camera.
-
-## Intrinsics
-
-* focal length {:.2} px ({})
-* principal point          ({:.2}, {:.2}) ({})
-* k₁ {:.5}
-",
+        "# Perspective reconstruction\n\nRMS {:.6} px; {:.1} % of the observations in front of \
+         their camera.\n\n## Intrinsics\n\n* focal length {:.2} px ({})\n* principal point \
+         ({:.2}, {:.2}) ({})\n* k₁ {:.5}\n",
         p.rms_px,
         100.0 * p.in_front,
         k.focal_px,
@@ -1705,12 +1698,8 @@ RMS {:.6} px; {:.1} % of the observations in front of          their camera.
     );
     if let Some(sc) = &p.self_calibration {
         s.push_str(&format!(
-            "
-## Self-calibration
-
-* linear absolute dual quadric eigenvalues: {:.4} {:.4}              {:.4} {:.4}
-* PSD-constrained solve: {}
-",
+            "\n## Self-calibration\n\n* linear absolute dual quadric eigenvalues: {:.4} {:.4} \
+             {:.4} {:.4}\n* PSD-constrained solve: {}\n",
             sc.linear_eigenvalues[0],
             sc.linear_eigenvalues[1],
             sc.linear_eigenvalues[2],
@@ -1719,17 +1708,12 @@ RMS {:.6} px; {:.1} % of the observations in front of          their camera.
         ));
     }
     s.push_str(
-        "
-## Starts (screened)
-
-| start | focal (px) | mirrored | RMS (px) | kept |
-|---|---|---|---|---|
-",
+        "\n## Starts (screened)\n\n| start | focal (px) | mirrored | RMS (px) | kept |\n\
+         |---|---|---|---|---|\n",
     );
     for st in &p.starts {
         s.push_str(&format!(
-            "| {} | {:.1} | {} | {:.4} | {} |
-",
+            "| {} | {:.1} | {} | {:.4} | {} |\n",
             st.kind,
             st.focal_px,
             st.mirrored,
@@ -1737,33 +1721,30 @@ RMS {:.6} px; {:.1} % of the observations in front of          their camera.
             if st.chosen { "✓" } else { "" }
         ));
     }
-    s.push_str(
-        "
-## Adjustment
-
-| stage | status | iterations | RMS before (px) | RMS after (px) | s |
-|---|---|---|---|---|---|
-",
-    );
-    for st in &p.stages {
-        s.push_str(&format!(
-            "| {} | {:?} | {} | {:.6} | {:.6} | {:.3} |
-",
-            st.stage, st.status, st.iterations, st.rms_before_px, st.rms_after_px, st.seconds
-        ));
-    }
+    s.push_str("\n## Adjustment\n\n");
+    s.push_str(&stages_table(&p.stages));
     s
 }
 
 /// Markdown table of the projective stages.
 fn projective_markdown(p: &crate::reconstruction::ProjectiveResult) -> String {
-    let mut s = format!(
+    format!(
         "# Projective reconstruction\n\nstart: {:?}; final RMS {:.6} px; reduced camera system \
-         {} non-zeros\n\n| stage | status | iterations | RMS before (px) | RMS after (px) | s |\n\
+         {} non-zeros\n\n{}",
+        p.start,
+        p.rms_px,
+        p.schur_nnz,
+        stages_table(&p.stages)
+    )
+}
+
+/// Markdown table of solver stages: status, iterations, RMS before and after, seconds.
+fn stages_table(stages: &[crate::projective::StageReport]) -> String {
+    let mut s = String::from(
+        "| stage | status | iterations | RMS before (px) | RMS after (px) | s |\n\
          |---|---|---|---|---|---|\n",
-        p.start, p.rms_px, p.schur_nnz
     );
-    for st in &p.stages {
+    for st in stages {
         s.push_str(&format!(
             "| {} | {:?} | {} | {:.6} | {:.6} | {:.3} |\n",
             st.stage, st.status, st.iterations, st.rms_before_px, st.rms_after_px, st.seconds
