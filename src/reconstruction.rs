@@ -1550,19 +1550,29 @@ fn fit_selection(
 /// frames (those not longer than `F`) are slid by a quarter of their length; the block with
 /// the most observations (at least 2 frames × 4 tracks) wins. Returns `(ratio, frames,
 /// tracks, first frame)`. The rank diagnostic of complete data, made available to partial
-/// tracks (a video's): a rank-3 completion has no σ4. Cost `O(F · N)` per window length for
-/// the counts (prefix sums per track), plus one truncated SVD of the block.
+/// tracks (a video's): a rank-3 completion has no σ4. Each track's runs of consecutive
+/// visible frames are listed once; for each window length a difference array over the
+/// window starts counts the tracks whose run covers the window, `O(runs + F)`, plus one
+/// truncated SVD of the block.
 fn complete_block_rank_ratio(
     meas: &Measurements,
     svd_cfg: &TruncatedSvdConfig,
 ) -> Option<(f64, usize, usize, usize)> {
     let (nf, np) = (meas.n_frames(), meas.n_points());
-    // prefix[p][f] = observations of track p in frames < f.
-    let mut prefix = vec![0u32; np * (nf + 1)];
+    // (first, end) of every run of consecutive visible frames, with its track.
+    let mut runs: Vec<(usize, usize, usize)> = Vec::new();
     for p in 0..np {
-        for f in 0..nf {
-            prefix[p * (nf + 1) + f + 1] =
-                prefix[p * (nf + 1) + f] + u32::from(meas.is_visible(f, p));
+        let mut f = 0;
+        while f < nf {
+            if meas.is_visible(f, p) {
+                let a = f;
+                while f < nf && meas.is_visible(f, p) {
+                    f += 1;
+                }
+                runs.push((a, f, p));
+            } else {
+                f += 1;
+            }
         }
     }
     let mut best: Option<(usize, usize, usize)> = None; // (observations, start, len)
@@ -1570,14 +1580,22 @@ fn complete_block_rank_ratio(
         if len > nf || len < 2 {
             continue;
         }
+        // covered[s] = tracks seen in every frame of [s, s + len).
+        let mut diff = vec![0i64; nf + 1];
+        for &(a, b, _) in runs.iter().filter(|r| r.1 - r.0 >= len) {
+            diff[a] += 1;
+            diff[b - len + 1] -= 1;
+        }
+        let mut covered = vec![0usize; nf];
+        let mut acc = 0i64;
+        for (c, d) in covered.iter_mut().zip(&diff) {
+            acc += d;
+            *c = acc as usize;
+        }
         let step = (len / 4).max(1);
         let mut start = 0;
         loop {
-            let n = (0..np)
-                .filter(|&p| {
-                    prefix[p * (nf + 1) + start + len] - prefix[p * (nf + 1) + start] == len as u32
-                })
-                .count();
+            let n = covered[start];
             if n >= 4 && best.is_none_or(|b| n * len > b.0) {
                 best = Some((n * len, start, len));
             }
@@ -1588,8 +1606,10 @@ fn complete_block_rank_ratio(
         }
     }
     let (_, f0, len) = best?;
-    let tracks: Vec<usize> = (0..np)
-        .filter(|&p| prefix[p * (nf + 1) + f0 + len] - prefix[p * (nf + 1) + f0] == len as u32)
+    let tracks: Vec<usize> = runs
+        .iter()
+        .filter(|&&(a, b, _)| a <= f0 && f0 + len <= b)
+        .map(|&(_, _, p)| p)
         .collect();
     let rows = 2 * len;
     let mean: Vec<f64> = (0..rows)
