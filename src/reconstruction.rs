@@ -1478,17 +1478,19 @@ fn fit_selection(
     let mirrored = metric::apply_necker_convention(&mut model);
 
     // With the automatic choice, a table the projective stages cannot use (a frame with
-    // fewer than 6 tracks, …) keeps the affine camera.
-    let projective_usable = match projective::check_observations(&meas) {
-        Err(e) if config.camera == CameraModel::Auto => {
-            warnings.push(format!(
-                "camera auto: the perspective camera was not tried ({e}); the scaled \
-                 orthographic camera is kept"
-            ));
-            false
-        }
-        _ => true,
-    };
+    // fewer than 6 tracks, …) keeps the affine camera. (The other cameras get the same
+    // check, as an error, inside `projective::fit`.)
+    let projective_usable = config.camera != CameraModel::Auto
+        || match projective::check_observations(&meas) {
+            Err(e) => {
+                warnings.push(format!(
+                    "camera auto: the perspective camera was not tried ({e}); the scaled \
+                     orthographic camera is kept"
+                ));
+                false
+            }
+            Ok(()) => true,
+        };
     let projective = if config.camera.is_projective() && projective_usable {
         let start = projective::AffineStart {
             m: affine.m_hat.as_ref(),
