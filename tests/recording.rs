@@ -1189,11 +1189,9 @@ fn cli_track_records_frames_counts_and_tracks() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// The projective camera's stages are recorded: the pOSE and bundle-adjustment iterations,
-/// residual arrows to `π(P_f X_p)` for every kept entry, per-frame RMS and the stage table.
-#[test]
-fn reconstruct_recorded_projective_stages() {
-    let scene = generate(&SynthConfig {
+/// A small strong-perspective scene with missing entries (10 frames × 40 tracks).
+fn perspective_scene() -> rank3::synth::SynthScene {
+    generate(&SynthConfig {
         camera: rank3::CameraModel::Perspective,
         frames: 10,
         points: 40,
@@ -1203,7 +1201,13 @@ fn reconstruct_recorded_projective_stages() {
         seed: 3,
         ..Default::default()
     })
-    .unwrap();
+    .unwrap()
+}
+/// The projective camera's stages are recorded: the pOSE and bundle-adjustment iterations,
+/// residual arrows to `π(P_f X_p)` for every kept entry, per-frame RMS and the stage table.
+#[test]
+fn reconstruct_recorded_projective_stages() {
+    let scene = perspective_scene();
     let table = &scene.table;
     let (dir, path, rec) = temp_recording("projective");
     let config = Config {
@@ -1257,17 +1261,7 @@ fn reconstruct_recorded_projective_stages() {
 /// (with the estimated focal length) and pose per fitted frame, static frustums, the report.
 #[test]
 fn reconstruct_recorded_perspective_frustums() {
-    let scene = generate(&SynthConfig {
-        camera: rank3::CameraModel::Perspective,
-        frames: 10,
-        points: 40,
-        noise: 0.3,
-        missing: 0.3,
-        distance: 2.5,
-        seed: 3,
-        ..Default::default()
-    })
-    .unwrap();
+    let scene = perspective_scene();
     let table = &scene.table;
     let (dir, path, rec) = temp_recording("perspective");
     let mut config = Config {
