@@ -131,6 +131,85 @@ struct ReconstructOpts {
     /// Scale of the robust loss, pixels.
     #[arg(long, value_name = "PX", default_value_t = 2.0)]
     loss_scale: f64,
+    /// Independently moving objects: segment the tracks into rigid groups, `auto` (the
+    /// number found from the data) or a given count K, and reconstruct each group on its
+    /// own: OUT/objects.csv (track,object; -1 = outlier), OUT/segmentation.json and
+    /// OUT/object_<k>/ per object (docs/formats.md).
+    #[arg(long, value_name = "auto|K", value_parser = parse_objects)]
+    objects: Option<rank3::segment::Objects>,
+}
+
+fn parse_objects(s: &str) -> Result<rank3::segment::Objects, String> {
+    if s.eq_ignore_ascii_case("auto") {
+        return Ok(rank3::segment::Objects::Auto);
+    }
+    match s.parse::<usize>() {
+        Ok(k) if (1..=1000).contains(&k) => Ok(rank3::segment::Objects::Count(k)),
+        _ => Err(format!("`{s}` is neither `auto` nor a count in 1..=1000")),
+    }
+}
+
+/// `--objects`: segmentation, one reconstruction per object, their files and recording.
+fn reconstruct_objects_cli(
+    #[cfg(feature = "rerun")] recording: Option<&rerun::RecordingStream>,
+    table: &rank3::TrackTable,
+    config: &Config,
+    objects: rank3::segment::Objects,
+    out: &Path,
+) -> Result<(), rank3::Error> {
+    let seg = rank3::segment::SegmentConfig {
+        objects,
+        image_area: config
+            .perspective
+            .intrinsics
+            .image_size
+            .map(|[w, h]| w as f64 * h as f64),
+        ..Default::default()
+    };
+    let mb = rank3::objects::reconstruct_objects(table, config, &seg)?;
+    #[cfg(feature = "rerun")]
+    if let Some(r) = recording {
+        rank3::recording::log_objects(r, table, &mb)?;
+    }
+    let given = matches!(objects, rank3::segment::Objects::Count(_));
+    rank3::output::write_objects(&mb, given, out)?;
+    let s = &mb.segmentation;
+    eprintln!(
+        "segmentation: {} object(s) ({}), {} outlier and {} unscored tracks, σ {:.3} px, {} rounds, {:.2} s",
+        mb.objects.len(),
+        if given { "given" } else { "found" },
+        s.n_outliers(),
+        s.labels
+            .iter()
+            .filter(|l| **l == rank3::segment::Label::Unscored)
+            .count(),
+        s.sigma,
+        s.rounds,
+        s.seconds
+    );
+    for o in &mb.objects {
+        match &o.reconstruction {
+            Ok(r) => eprintln!(
+                "object {}: {} tracks, camera {:?}, RMS {:.3} px -> {}",
+                o.index,
+                o.tracks.len(),
+                r.camera_model,
+                r.rms_px,
+                out.join(rank3::objects::object_dir(o.index)).display()
+            ),
+            Err(e) => eprintln!(
+                "object {}: {} tracks, not reconstructed: {e}",
+                o.index,
+                o.tracks.len()
+            ),
+        }
+    }
+    eprintln!(
+        "wrote {} and {}",
+        out.join("objects.csv").display(),
+        out.join("segmentation.json").display()
+    );
+    Ok(())
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -256,8 +335,9 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     let recording = a.record.open(
         "rank3",
         rank3::recording::LayoutParts {
-            reconstruction: true,
-            perspective: matches!(a.camera, CameraArg::Perspective),
+            reconstruction: a.opts.objects.is_none(),
+            perspective: matches!(a.camera, CameraArg::Perspective) && a.opts.objects.is_none(),
+            objects: a.opts.objects.is_some(),
             ..Default::default()
         },
     )?;
@@ -275,6 +355,16 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         100.0 * t.fill()
     );
     let config = a.opts.config(a.camera, None);
+    if let Some(objects) = a.opts.objects {
+        return reconstruct_objects_cli(
+            #[cfg(feature = "rerun")]
+            recording.as_ref(),
+            t,
+            &config,
+            objects,
+            &a.out,
+        );
+    }
     #[cfg(feature = "rerun")]
     let rec = rank3::recording::reconstruct_recorded(recording.as_ref(), t, &config)?;
     #[cfg(feature = "rerun")]
@@ -833,6 +923,7 @@ fn track_recorded(
             reconstruction: !log_table,
             truth: false,
             perspective: !log_table && perspective,
+            objects: false,
         },
     )?;
     #[cfg(not(feature = "rerun"))]
@@ -942,6 +1033,27 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
         table = table.select(&frames, &full);
     }
     let config = a.recon.config(a.camera, tracked_size);
+    if let Some(objects) = a.recon.objects {
+        #[cfg(feature = "rerun")]
+        if let Some(r) = recording.as_ref() {
+            rank3::recording::send_layout(
+                r,
+                rank3::recording::LayoutParts {
+                    tracking: true,
+                    objects: true,
+                    ..Default::default()
+                },
+            )?;
+        }
+        return reconstruct_objects_cli(
+            #[cfg(feature = "rerun")]
+            recording.as_ref(),
+            &table,
+            &config,
+            objects,
+            &a.out,
+        );
+    }
     let spinner = indicatif::ProgressBar::new_spinner()
         .with_style(bar_style("reconstructing {spinner} {elapsed} {msg}"));
     let mut obs = SpinnerObserver(spinner.clone());

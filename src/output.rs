@@ -223,3 +223,29 @@ pub fn write_colmap(rec: &Reconstruction, table: &crate::TrackTable, dir: &Path)
         None => Ok(false),
     }
 }
+
+/// Files of a multi-object run in `dir`: `objects.csv` (`track,object` for every input
+/// track, −1 = outlier or unscored), `segmentation.json` ([`crate::objects::MultiBodyReport`])
+/// and, per object reconstructed, `object_<k>/` with [`write_all`]'s files. Returns the
+/// object folders written.
+pub fn write_objects(
+    mb: &crate::objects::MultiBody,
+    given: bool,
+    dir: &Path,
+) -> Result<Vec<std::path::PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let csv = dir.join("objects.csv");
+    std::fs::write(&csv, mb.objects_csv()).map_err(|e| Error::io(&csv, e))?;
+    let json = dir.join("segmentation.json");
+    let text = serde_json::to_string_pretty(&mb.report(given)).expect("serializable report");
+    std::fs::write(&json, text).map_err(|e| Error::io(&json, e))?;
+    let mut dirs = Vec::new();
+    for o in &mb.objects {
+        if let Ok(rec) = &o.reconstruction {
+            let d = dir.join(crate::objects::object_dir(o.index));
+            write_all(rec, &d)?;
+            dirs.push(d);
+        }
+    }
+    Ok(dirs)
+}

@@ -557,3 +557,114 @@ fn projective_camera_end_to_end() {
         }
     }
 }
+
+/// `reconstruct --objects auto` on two rigid bodies moving independently (orthographic
+/// camera, 0.3 px noise) plus random-walk tracks: two objects found with their tracks,
+/// the walks labelled −1, one reconstruction per object on its own tracks.
+#[test]
+fn objects_are_segmented_and_reconstructed_each() {
+    use rand::{RngExt, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+    let d = tmp("objects");
+    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+    let g = Normal::new(0.0, 1.0).unwrap();
+    let (frames, sizes, walks) = (24usize, [40usize, 25], 3usize);
+    let mut csv = String::from("frame,track,x,y\n");
+    let mut truth = Vec::new();
+    let mut track = 0;
+    for (o, &size) in sizes.iter().enumerate() {
+        let axis = nalgebra::Vector3::new(g.sample(&mut rng), g.sample(&mut rng), 1.0).normalize();
+        let centre = [150.0 + 250.0 * o as f64, 200.0];
+        let drift = [2.0 - 4.0 * o as f64, 1.0 + o as f64];
+        for _ in 0..size {
+            let x = nalgebra::Vector3::new(
+                60.0 * (rng.random::<f64>() - 0.5),
+                60.0 * (rng.random::<f64>() - 0.5),
+                60.0 * (rng.random::<f64>() - 0.5),
+            );
+            for f in 0..frames {
+                let r = nalgebra::Rotation3::from_scaled_axis(
+                    axis * (0.04 + 0.03 * o as f64) * f as f64,
+                );
+                let y = r * x;
+                csv += &format!(
+                    "{f},{track},{},{}\n",
+                    centre[0] + drift[0] * f as f64 + y[0] + 0.3 * g.sample(&mut rng),
+                    centre[1] + drift[1] * f as f64 + y[1] + 0.3 * g.sample(&mut rng)
+                );
+            }
+            truth.push(o as i64);
+            track += 1;
+        }
+    }
+    for _ in 0..walks {
+        let mut p = [
+            100.0 + 400.0 * rng.random::<f64>(),
+            100.0 + 200.0 * rng.random::<f64>(),
+        ];
+        for f in 0..frames {
+            p[0] += 3.0 * g.sample(&mut rng);
+            p[1] += 3.0 * g.sample(&mut rng);
+            csv += &format!("{f},{track},{},{}\n", p[0], p[1]);
+        }
+        truth.push(-1);
+        track += 1;
+    }
+    let input = d.join("two.csv");
+    std::fs::write(&input, csv).unwrap();
+    let out = d.join("out");
+    let log = run_ok(
+        bin()
+            .args(["reconstruct"])
+            .arg(&input)
+            .arg("--out")
+            .arg(&out)
+            .args(["--objects", "auto", "--camera", "orthographic"]),
+    );
+    assert!(log.contains("2 object(s) (found)"), "{log}");
+    let labels: Vec<(usize, i64)> = std::fs::read_to_string(out.join("objects.csv"))
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let (t, o) = l.split_once(',').unwrap();
+            (t.parse().unwrap(), o.parse().unwrap())
+        })
+        .collect();
+    assert_eq!(labels.len(), truth.len(), "every input track is listed");
+    // The largest object is object 0; the walks are −1.
+    for (t, o) in &labels {
+        let expect = match truth[*t] {
+            -1 => -1,
+            k => k,
+        };
+        assert_eq!(*o, expect, "track {t}");
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("segmentation.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["n_objects"], 2);
+    assert_eq!(report["n_outlier_tracks"], walks);
+    for k in 0..2 {
+        let rec: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join(format!("object_{k}/reconstruction.json"))).unwrap(),
+        )
+        .unwrap();
+        assert!(
+            rec["rms_px"].as_f64().unwrap() < 0.5,
+            "object {k}: {}",
+            rec["rms_px"]
+        );
+        assert_eq!(report["objects"][k]["n_tracks"], sizes[k]);
+    }
+    // A count of 0 is refused by the argument parser.
+    let err = run_err(
+        bin()
+            .args(["reconstruct"])
+            .arg(&input)
+            .arg("--out")
+            .arg(&out)
+            .args(["--objects", "0"]),
+    );
+    assert!(err.contains("neither `auto` nor a count"), "{err}");
+}

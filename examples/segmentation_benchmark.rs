@@ -1,0 +1,227 @@
+//! Motion segmentation on the Hopkins 155 development sequences (`hopkins_dev/`, see
+//! its README): misclassification per sequence and averaged over the two- and
+//! three-motion files, with the number of groups found automatically and with it given;
+//! then the same sequences with entries hidden (tracks made to enter and leave) and with
+//! random-walk outlier tracks added.
+//!
+//! ```text
+//! cargo run --release --example segmentation_benchmark [-- SEQUENCE...]
+//! ```
+//! Environment: `RANK3_DATASETS` (data-set directory), `HIDE` (fractions hidden, default
+//! `0.2,0.5`), `WALKS` (random-walk tracks added as a fraction of the tracks, default 0.1),
+//! `SEED` (default 1).
+
+use std::time::Instant;
+
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+use rank3::Measurements;
+use rank3::datasets::{self, Hopkins};
+use rank3::segment::{Label, Objects, SegmentConfig, misclassification, segment};
+
+struct Row {
+    name: String,
+    groups: usize,
+    error_auto: f64,
+    k_auto: usize,
+    error_k: f64,
+    outliers_auto: usize,
+    seconds: f64,
+}
+
+fn run(h: &Hopkins, objects: Objects, seed: u64) -> (rank3::segment::Segmentation, f64) {
+    let cfg = SegmentConfig {
+        objects,
+        image_area: Some(h.image_size.0 * h.image_size.1),
+        label_cost_scale: std::env::var("LABEL_COST")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(SegmentConfig::default().label_cost_scale),
+        ..Default::default()
+    };
+    let t = Instant::now();
+    let seg = segment(&h.measurements, &cfg, &mut StdRng::seed_from_u64(seed)).expect("segment");
+    (seg, t.elapsed().as_secs_f64())
+}
+
+/// Hides, per track, a random run of frames at its start or end totalling up to `frac`
+/// of the frames on average (tracks enter late or leave early); adds `walks` random-walk
+/// tracks (truth −1) with steps of 2 px per coordinate.
+fn degrade(h: &Hopkins, frac: f64, walks: usize, seed: u64) -> (Hopkins, Vec<i64>) {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let f = h.measurements.n_frames();
+    let n0 = h.measurements.n_points();
+    let n = n0 + walks;
+    let mut w = faer::Mat::<f64>::zeros(2 * f, n);
+    let mut vis = vec![true; f * n];
+    for p in 0..n0 {
+        for r in 0..2 * f {
+            w[(r, p)] = h.measurements.w[(r, p)];
+        }
+    }
+    for p in n0..n {
+        let mut x = [
+            h.image_size.0 * rng.random::<f64>(),
+            h.image_size.1 * rng.random::<f64>(),
+        ];
+        for fr in 0..f {
+            for c in 0..2 {
+                x[c] += 2.0 * (2.0 * rng.random::<f64>() - 1.0) * 3f64.sqrt();
+                w[(2 * fr + c, p)] = x[c];
+            }
+        }
+    }
+    for p in 0..n {
+        let k = ((2.0 * frac * rng.random::<f64>()).min(0.9) * f as f64).round() as usize;
+        let at_start = rng.random::<bool>();
+        for i in 0..k {
+            let fr = if at_start { i } else { f - 1 - i };
+            vis[fr * n + p] = false;
+        }
+    }
+    let mut truth: Vec<i64> = h.groups.iter().map(|&g| g as i64).collect();
+    truth.extend(std::iter::repeat_n(-1, walks));
+    (
+        Hopkins {
+            measurements: Measurements::new(w, vis),
+            groups: h.groups.clone(),
+            n_groups: h.n_groups,
+            image_size: h.image_size,
+        },
+        truth,
+    )
+}
+
+fn main() {
+    let dir = datasets::dir().join("hopkins_dev");
+    let wanted: Vec<String> = std::env::args().skip(1).collect();
+    let seed: u64 = std::env::var("SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
+    let mut files: Vec<_> = match std::fs::read_dir(&dir) {
+        Ok(d) => d
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "txt") && !p.ends_with("README.txt"))
+            .collect(),
+        Err(e) => {
+            eprintln!("{}: {e}; set RANK3_DATASETS", dir.display());
+            return;
+        }
+    };
+    files.sort();
+    let mut rows = Vec::new();
+    println!(
+        "{:<16} {:>3} {:>5} {:>4} | {:>8} {:>6} {:>5} | {:>8} | {:>7}",
+        "sequence", "F", "P", "G", "err auto", "K", "outl", "err K", "s"
+    );
+    for path in &files {
+        let name = path.file_stem().unwrap().to_string_lossy().to_string();
+        if !wanted.is_empty() && !wanted.contains(&name) {
+            continue;
+        }
+        let h = datasets::read_hopkins(path).expect("read");
+        let (auto, secs) = run(&h, Objects::Auto, seed);
+        let (given, _) = run(&h, Objects::Count(h.n_groups), seed);
+        let row = Row {
+            name: name.clone(),
+            groups: h.n_groups,
+            error_auto: misclassification(&auto.codes(), &h.groups),
+            k_auto: auto.objects.len(),
+            error_k: misclassification(&given.codes(), &h.groups),
+            outliers_auto: auto.n_outliers(),
+            seconds: secs,
+        };
+        println!(
+            "{:<16} {:>3} {:>5} {:>4} | {:>7.2}% {:>6} {:>5} | {:>7.2}% | {:>7.2}   σ {:.3}",
+            row.name,
+            h.measurements.n_frames(),
+            h.measurements.n_points(),
+            row.groups,
+            100.0 * row.error_auto,
+            row.k_auto,
+            row.outliers_auto,
+            100.0 * row.error_k,
+            row.seconds,
+            auto.sigma
+        );
+        rows.push(row);
+    }
+    for g in [2, 3] {
+        let sel: Vec<&Row> = rows.iter().filter(|r| r.groups == g).collect();
+        if sel.is_empty() {
+            continue;
+        }
+        let m = sel.len() as f64;
+        println!(
+            "{g} motions ({} files): mean error auto {:.2}% (K right in {}/{}), K given {:.2}%; median auto {:.2}%",
+            sel.len(),
+            100.0 * sel.iter().map(|r| r.error_auto).sum::<f64>() / m,
+            sel.iter().filter(|r| r.k_auto == g).count(),
+            sel.len(),
+            100.0 * sel.iter().map(|r| r.error_k).sum::<f64>() / m,
+            100.0 * rank3::eval::median(&sel.iter().map(|r| r.error_auto).collect::<Vec<_>>()),
+        );
+    }
+
+    // Degraded: entries hidden and random walks added.
+    let hide: Vec<f64> = std::env::var("HIDE")
+        .unwrap_or_else(|_| "0.2,0.5".into())
+        .split(',')
+        .filter_map(|s| s.trim().parse().ok())
+        .collect();
+    let walk_frac: f64 = std::env::var("WALKS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0.1);
+    for &frac in &hide {
+        let (
+            mut err_sum,
+            mut prec_num,
+            mut prec_den,
+            mut rec_num,
+            mut rec_den,
+            mut k_right,
+            mut count,
+        ) = (0.0, 0usize, 0usize, 0usize, 0usize, 0usize, 0usize);
+        let mut missing_sum = 0.0;
+        for path in &files {
+            let name = path.file_stem().unwrap().to_string_lossy().to_string();
+            if !wanted.is_empty() && !wanted.contains(&name) {
+                continue;
+            }
+            let h0 = datasets::read_hopkins(path).expect("read");
+            let walks = (walk_frac * h0.groups.len() as f64).round() as usize;
+            let (h, truth) = degrade(&h0, frac, walks, seed);
+            let vis = &h.measurements.visible;
+            missing_sum += vis.iter().filter(|v| !**v).count() as f64 / vis.len() as f64;
+            let (seg, _) = run(&h, Objects::Auto, seed);
+            let n0 = h0.groups.len();
+            let codes = seg.codes();
+            err_sum += misclassification(&codes[..n0], &h0.groups);
+            let flagged: Vec<bool> = seg
+                .labels
+                .iter()
+                .map(|l| *l != Label::Object(usize::MAX) && !matches!(l, Label::Object(_)))
+                .collect();
+            prec_den += flagged.iter().filter(|&&f| f).count();
+            prec_num += (0..truth.len())
+                .filter(|&p| flagged[p] && truth[p] < 0)
+                .count();
+            rec_den += walks;
+            rec_num += (n0..truth.len()).filter(|&p| flagged[p]).count();
+            k_right += usize::from(seg.objects.len() == h0.n_groups);
+            count += 1;
+        }
+        if count > 0 {
+            println!(
+                "hidden {:.0}% of entries on average, +{:.0}% random walks ({count} files): mean misclassification of the true tracks {:.2}%, K right {k_right}/{count}, outlier precision {:.3} recall {:.3}",
+                100.0 * missing_sum / count as f64,
+                100.0 * walk_frac,
+                100.0 * err_sum / count as f64,
+                prec_num as f64 / prec_den.max(1) as f64,
+                rec_num as f64 / rec_den.max(1) as f64,
+            );
+        }
+    }
+}

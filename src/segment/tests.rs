@@ -1,0 +1,247 @@
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+use rand_distr::{Distribution, Normal};
+
+use super::*;
+
+/// How an object moves.
+#[derive(Clone, Copy)]
+enum Motion {
+    /// Rotates and translates.
+    General,
+    /// Translates only (its trajectories span a 2-dimensional affine subspace).
+    Translation,
+}
+
+/// Tracks of `sizes.len()` rigid objects seen by a scaled orthographic camera over `f`
+/// frames, plus `walks` random-walk tracks; returns (measurements, truth codes with −1 for
+/// the walks). `hide` is the fraction of each track's frames hidden at its start or end.
+fn scene(
+    f: usize,
+    sizes: &[(usize, Motion)],
+    walks: usize,
+    noise: f64,
+    hide: f64,
+    seed: u64,
+) -> (Measurements, Vec<i64>) {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let gauss = Normal::new(0.0, 1.0).unwrap();
+    let n: usize = sizes.iter().map(|s| s.0).sum::<usize>() + walks;
+    let mut w = faer::Mat::<f64>::zeros(2 * f, n);
+    let mut truth = Vec::with_capacity(n);
+    let mut col = 0;
+    for (g, &(size, motion)) in sizes.iter().enumerate() {
+        // A smooth random rotation path and image-plane drift per object.
+        let axis = nalgebra::Vector3::new(
+            gauss.sample(&mut rng),
+            gauss.sample(&mut rng),
+            gauss.sample(&mut rng),
+        )
+        .normalize();
+        let speed = 0.02 + 0.03 * rng.random::<f64>();
+        let start = nalgebra::Rotation3::from_scaled_axis(nalgebra::Vector3::new(
+            gauss.sample(&mut rng),
+            gauss.sample(&mut rng),
+            gauss.sample(&mut rng),
+        ));
+        let centre = [
+            100.0 + 400.0 * rng.random::<f64>(),
+            100.0 + 300.0 * rng.random::<f64>(),
+        ];
+        let drift = [gauss.sample(&mut rng) * 3.0, gauss.sample(&mut rng) * 3.0];
+        let extent = 40.0 + 60.0 * rng.random::<f64>();
+        for _ in 0..size {
+            let x = nalgebra::Vector3::new(
+                extent * (2.0 * rng.random::<f64>() - 1.0),
+                extent * (2.0 * rng.random::<f64>() - 1.0),
+                extent * (2.0 * rng.random::<f64>() - 1.0),
+            );
+            for fr in 0..f {
+                let r = match motion {
+                    Motion::General => {
+                        nalgebra::Rotation3::from_scaled_axis(axis * speed * fr as f64) * start
+                    }
+                    Motion::Translation => start,
+                };
+                let y = r * x;
+                w[(2 * fr, col)] =
+                    centre[0] + drift[0] * fr as f64 + y[0] + noise * gauss.sample(&mut rng);
+                w[(2 * fr + 1, col)] =
+                    centre[1] + drift[1] * fr as f64 + y[1] + noise * gauss.sample(&mut rng);
+            }
+            truth.push(g as i64);
+            col += 1;
+        }
+    }
+    for _ in 0..walks {
+        let mut p = [
+            100.0 + 400.0 * rng.random::<f64>(),
+            100.0 + 300.0 * rng.random::<f64>(),
+        ];
+        for fr in 0..f {
+            p[0] += 4.0 * gauss.sample(&mut rng);
+            p[1] += 4.0 * gauss.sample(&mut rng);
+            w[(2 * fr, col)] = p[0];
+            w[(2 * fr + 1, col)] = p[1];
+        }
+        truth.push(-1);
+        col += 1;
+    }
+    let mut visible = vec![true; f * n];
+    if hide > 0.0 {
+        for p in 0..n {
+            let k = (hide * f as f64 * rng.random::<f64>()).round() as usize;
+            let at_start = rng.random::<bool>();
+            for i in 0..k {
+                let fr = if at_start { i } else { f - 1 - i };
+                visible[fr * n + p] = false;
+            }
+        }
+    }
+    (Measurements::new(w, visible), truth)
+}
+
+fn truth_groups(truth: &[i64]) -> Vec<usize> {
+    truth
+        .iter()
+        .map(|&t| if t < 0 { usize::MAX } else { t as usize })
+        .collect()
+}
+
+/// Misclassification over the objects' tracks only (the walks are scored separately).
+fn error_on_objects(seg: &Segmentation, truth: &[i64]) -> f64 {
+    let idx: Vec<usize> = (0..truth.len()).filter(|&p| truth[p] >= 0).collect();
+    let found: Vec<i64> = idx.iter().map(|&p| seg.labels[p].code()).collect();
+    let t: Vec<usize> = truth_groups(truth)
+        .into_iter()
+        .enumerate()
+        .filter(|(p, _)| truth[*p] >= 0)
+        .map(|x| x.1)
+        .collect();
+    misclassification(&found, &t)
+}
+
+#[test]
+fn noise_free_complete_scenes_are_segmented_exactly() {
+    for (sizes, seed) in [
+        (vec![(60, Motion::General), (30, Motion::General)], 1u64),
+        (
+            vec![
+                (50, Motion::General),
+                (40, Motion::General),
+                (25, Motion::General),
+            ],
+            2,
+        ),
+    ] {
+        let (meas, truth) = scene(30, &sizes, 0, 0.0, 0.0, seed);
+        let seg = segment(
+            &meas,
+            &SegmentConfig::default(),
+            &mut StdRng::seed_from_u64(7),
+        )
+        .unwrap();
+        assert_eq!(seg.objects.len(), sizes.len(), "groups found");
+        assert_eq!(error_on_objects(&seg, &truth), 0.0);
+        assert_eq!(seg.n_outliers(), 0);
+    }
+}
+
+#[test]
+fn noisy_partial_scene_with_translating_object_and_random_walks() {
+    let sizes = [
+        (80, Motion::General),
+        (30, Motion::Translation),
+        (30, Motion::General),
+    ];
+    let (meas, truth) = scene(40, &sizes, 10, 0.5, 0.4, 3);
+    let seg = segment(
+        &meas,
+        &SegmentConfig::default(),
+        &mut StdRng::seed_from_u64(7),
+    )
+    .unwrap();
+    assert_eq!(
+        seg.objects.len(),
+        3,
+        "groups found: {:?}",
+        seg.objects
+            .iter()
+            .map(|o| o.tracks.len())
+            .collect::<Vec<_>>()
+    );
+    let err = error_on_objects(&seg, &truth);
+    assert!(err <= 0.05, "misclassification {err}");
+    // Every random walk is an outlier, and (almost) no object track is.
+    let walks_flagged = (0..truth.len())
+        .filter(|&p| truth[p] < 0 && seg.labels[p] == Label::Outlier)
+        .count();
+    assert_eq!(walks_flagged, 10);
+    assert!(seg.n_outliers() <= 12, "outliers {}", seg.n_outliers());
+    // σ close to the noise.
+    assert!((seg.sigma - 0.5).abs() < 0.15, "sigma {}", seg.sigma);
+}
+
+#[test]
+fn one_rigid_body_is_one_group_and_a_given_count_is_honoured() {
+    let (meas, truth) = scene(30, &[(100, Motion::General)], 0, 0.5, 0.0, 4);
+    let seg = segment(
+        &meas,
+        &SegmentConfig::default(),
+        &mut StdRng::seed_from_u64(1),
+    )
+    .unwrap();
+    assert_eq!(seg.objects.len(), 1);
+    assert!(seg.n_outliers() <= 2);
+    assert_eq!(
+        error_on_objects(&seg, &truth),
+        seg.n_outliers() as f64 / 100.0
+    );
+
+    let (meas, truth) = scene(
+        30,
+        &[(60, Motion::General), (40, Motion::General)],
+        0,
+        0.5,
+        0.0,
+        5,
+    );
+    let cfg = SegmentConfig {
+        objects: Objects::Count(2),
+        ..Default::default()
+    };
+    let seg = segment(&meas, &cfg, &mut StdRng::seed_from_u64(1)).unwrap();
+    assert_eq!(seg.objects.len(), 2);
+    assert!(error_on_objects(&seg, &truth) <= 0.01);
+}
+
+#[test]
+fn misclassification_matches_groups_optimally() {
+    // Found groups are a relabelling of the truth, one track wrong, one outlier.
+    let truth = [0, 0, 0, 1, 1, 2, 2, 2];
+    let found = [2, 2, 1, 0, 0, 1, 1, -1];
+    let e = misclassification(&found, &truth);
+    assert!((e - 2.0 / 8.0).abs() < 1e-12, "{e}");
+}
+
+#[test]
+fn bad_configuration_and_too_few_tracks_are_errors() {
+    let (meas, _) = scene(10, &[(3, Motion::General)], 0, 0.0, 0.0, 6);
+    let r = segment(
+        &meas,
+        &SegmentConfig::default(),
+        &mut StdRng::seed_from_u64(1),
+    );
+    assert!(matches!(r, Err(Error::TooFew { .. })), "{r:?}");
+    let cfg = SegmentConfig {
+        objects: Objects::Count(0),
+        ..Default::default()
+    };
+    assert!(matches!(
+        cfg.validate(),
+        Err(Error::InvalidConfig {
+            field: "objects",
+            ..
+        })
+    ));
+}
