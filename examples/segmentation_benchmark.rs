@@ -29,6 +29,13 @@ struct Row {
     seconds: f64,
 }
 
+fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name)
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(default)
+}
+
 fn run(h: &Hopkins, objects: Objects, seed: u64) -> (rank3::segment::Segmentation, f64) {
     let cfg = SegmentConfig {
         objects,
@@ -37,6 +44,9 @@ fn run(h: &Hopkins, objects: Objects, seed: u64) -> (rank3::segment::Segmentatio
             .ok()
             .and_then(|s| s.parse().ok())
             .unwrap_or(SegmentConfig::default().label_cost_scale),
+        hypotheses: env_or("HYPOTHESES", SegmentConfig::default().hypotheses),
+        neighbours: env_or("NEIGHBOURS", SegmentConfig::default().neighbours),
+        grow_steps: env_or("GROW", SegmentConfig::default().grow_steps),
         ..Default::default()
     };
     let t = Instant::now();

@@ -139,6 +139,28 @@ struct ReconstructOpts {
     objects: Option<rank3::segment::Objects>,
 }
 
+fn parse_synth_object(item: &str) -> Result<rank3::synth::SynthObject, String> {
+    use rank3::synth::{ObjectMotion, SynthObject};
+    let (share, motion) = item
+        .trim()
+        .split_once(':')
+        .ok_or_else(|| format!("`{item}` is not SHARE:MOTION (e.g. 0.2:rotating)"))?;
+    let share: f64 = share
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{share}` is not a fraction"))?;
+    let motion = match motion.trim() {
+        "rotating" => ObjectMotion::Rotating,
+        "translating" => ObjectMotion::Translating,
+        m => {
+            return Err(format!(
+                "motion `{m}` is neither `rotating` nor `translating`"
+            ));
+        }
+    };
+    Ok(SynthObject { share, motion })
+}
+
 fn parse_objects(s: &str) -> Result<rank3::segment::Objects, String> {
     if s.eq_ignore_ascii_case("auto") {
         return Ok(rank3::segment::Objects::Auto);
@@ -306,6 +328,11 @@ struct SynthArgs {
     /// Fraction of entries of inlier tracks with a gross error (15–60 px).
     #[arg(long, default_value_t = 0.0)]
     gross: f64,
+    /// Extra rigid objects moving independently of the main one, as a comma-separated
+    /// list of `SHARE:MOTION` (fraction of the tracks, `rotating` or `translating`), e.g.
+    /// `0.2:rotating,0.15:translating`. Their tracks' object is `object` in truth.json.
+    #[arg(long, value_name = "SHARE:MOTION,...", value_delimiter = ',', value_parser = parse_synth_object)]
+    objects: Option<Vec<rank3::synth::SynthObject>>,
     #[arg(long, default_value_t = 0)]
     seed: u64,
     #[cfg(feature = "rerun")]
@@ -648,6 +675,7 @@ fn synth(a: &SynthArgs) -> Result<(), rank3::Error> {
         noise: a.noise,
         missing: a.missing,
         outliers: a.outliers,
+        objects: a.objects.clone().unwrap_or_default(),
         outlier_kind: match a.outlier_kind {
             OutlierArg::Mixed => OutlierKind::Mixed,
             OutlierArg::RandomWalk => OutlierKind::RandomWalk,

@@ -67,6 +67,26 @@ pub enum OutlierKind {
     Sliding,
 }
 
+/// How an extra rigid object moves (see [`SynthConfig::objects`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ObjectMotion {
+    /// Turns about its own axis while drifting across the image.
+    Rotating,
+    /// Only drifts across the image, without turning (its tracks span a 2-dimensional
+    /// affine subspace, inside the span of a rotating body's: the hard case of motion
+    /// segmentation).
+    Translating,
+}
+
+/// An extra rigid object, moving independently of the main one.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SynthObject {
+    /// Fraction of the tracks on it, in (0, 1).
+    pub share: f64,
+    pub motion: ObjectMotion,
+}
+
 /// Settings of a synthetic scene.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SynthConfig {
@@ -111,6 +131,12 @@ pub struct SynthConfig {
     /// perspective, 20 or more nearly weak perspective. Ignored by the affine cameras.
     #[serde(default = "default_distance")]
     pub distance: f64,
+    /// Extra rigid objects moving independently of the main one (motion segmentation);
+    /// each is a copy of the shape at 0.35 × its size, placed beside it in the image and
+    /// seen by the same camera. Empty by default. Their tracks are drawn among the
+    /// non-outlier tracks; shares plus `outliers` must stay below 1.
+    #[serde(default)]
+    pub objects: Vec<SynthObject>,
 }
 
 /// Default [`SynthConfig::distance`], object radii.
@@ -167,6 +193,7 @@ impl Default for SynthConfig {
             seed: 0,
             focal: None,
             distance: DEFAULT_DISTANCE,
+            objects: Vec::new(),
         }
     }
 }
@@ -191,6 +218,10 @@ pub struct SynthScene {
     pub outlier_tracks: Vec<Option<OutlierKind>>,
     /// Observed entries with a gross error, as (frame, track) indices.
     pub gross_entries: Vec<(usize, usize)>,
+    /// The object of every track: 0 = the main one (whose cameras and points `truth`
+    /// holds), `k ≥ 1` = `config.objects[k − 1]` (its `truth` point is the shape point it
+    /// was made from, not its position).
+    pub objects: Vec<usize>,
 }
 
 /// The true pinhole cameras of a perspective scene: `w ≃ K_f (R_f X + t_f)`, pixels, with
@@ -295,6 +326,8 @@ struct TruthPoint {
     xyz: [f64; 3],
     outlier: bool,
     outlier_kind: Option<OutlierKind>,
+    /// 0 = the main object, k = `config.objects[k − 1]`.
+    object: usize,
 }
 
 #[derive(Serialize)]
@@ -354,6 +387,7 @@ impl SynthScene {
                     xyz: [m.points[p][0], m.points[p][1], m.points[p][2]],
                     outlier: self.outlier_tracks[p].is_some(),
                     outlier_kind: self.outlier_tracks[p],
+                    object: self.objects.get(p).copied().unwrap_or(0),
                 })
                 .collect(),
             gross_entries: self
@@ -401,6 +435,29 @@ fn check(cfg: &SynthConfig) -> Result<()> {
     }
     if !(0.0..1.0).contains(&cfg.outliers) {
         return bad("outliers", format!("{} is not in [0, 1)", cfg.outliers));
+    }
+    if cfg.objects.len() > 20 {
+        return bad(
+            "objects",
+            format!("{} extra objects (at most 20)", cfg.objects.len()),
+        );
+    }
+    if let Some(o) = cfg
+        .objects
+        .iter()
+        .find(|o| !(o.share > 0.0 && o.share < 1.0))
+    {
+        return bad("objects", format!("share {} is not in (0, 1)", o.share));
+    }
+    let shares: f64 = cfg.objects.iter().map(|o| o.share).sum();
+    if !(shares + cfg.outliers < 1.0) {
+        return bad(
+            "objects",
+            format!(
+                "the objects' shares ({shares}) and the outliers ({}) leave no track for the main object",
+                cfg.outliers
+            ),
+        );
     }
     if !(0.0..0.5).contains(&cfg.gross) {
         return bad("gross", format!("{} is not in [0, 0.5)", cfg.gross));
@@ -658,6 +715,40 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthScene> {
             k => k,
         });
     }
+    // Extra rigid objects: the next tracks in the shuffled order.
+    let mut objects = vec![0usize; n];
+    let mut next = n_out;
+    for (j, o) in cfg.objects.iter().enumerate() {
+        let count = (o.share * n as f64).round() as usize;
+        for &p in order.iter().skip(next).take(count) {
+            objects[p] = j + 1;
+        }
+        next += count;
+    }
+    // Their motions: object j turns about its own axis (or not), starts beside the main
+    // object and drifts.
+    let object_motion: Vec<(
+        nalgebra::Unit<Vector3<f64>>,
+        f64,
+        Vector2<f64>,
+        Vector2<f64>,
+    )> = cfg
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(j, o)| {
+            let a = 2.4 * (j as f64 + 1.0);
+            let axis = nalgebra::Unit::new_normalize(Vector3::new(a.cos(), 0.8, a.sin()));
+            let turn = match o.motion {
+                ObjectMotion::Rotating => 0.9 + 0.3 * j as f64,
+                ObjectMotion::Translating => 0.0,
+            };
+            let side = if j % 2 == 0 { 1.0 } else { -1.0 };
+            let offset = Vector2::new(side * 0.55, 0.25 * (j / 2) as f64) * cfg.image_size;
+            let drift = Vector2::new(-side * 0.15, 0.1) * cfg.image_size;
+            (axis, turn, offset, drift)
+        })
+        .collect();
     // A second rigid object: spins the other way about a tilted axis.
     let second_axis = nalgebra::Unit::new_normalize(Vector3::new(0.3, 1.0, 0.4));
     for p in 0..n {
@@ -673,6 +764,15 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthScene> {
         for fi in 0..f {
             let clean = imaging.image(fi, &truth.rotations[fi], x);
             let xy = match outlier_tracks[p] {
+                None if objects[p] > 0 => {
+                    // Scaled down about the origin, turned, seen as the second object is.
+                    let (axis, turn, offset, drift) = &object_motion[objects[p] - 1];
+                    let a = fi as f64 / (f - 1).max(1) as f64;
+                    let r2 = Rotation3::from_axis_angle(axis, turn * a) * truth.rotations[0];
+                    let cam = if perspective.is_some() { 0 } else { fi };
+                    let shift = truth.translations[0] - truth.translations[cam];
+                    imaging.image(cam, &r2, &(x * 0.35)) + shift + offset + drift * a
+                }
                 None | Some(OutlierKind::Mixed) => clean,
                 Some(OutlierKind::RandomWalk) => {
                     walk +=
@@ -730,12 +830,56 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthScene> {
         perspective,
         outlier_tracks,
         gross_entries,
+        objects,
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Extra objects take their share of the tracks, and each object's noise-free tracks
+    /// are rigid (their centred trajectories have rank ≤ 3; the translating object's ≤ 2)
+    /// while the union of two objects is not.
+    #[test]
+    fn extra_objects_are_rigid_and_independent() {
+        let cfg = SynthConfig {
+            noise: 0.0,
+            points: 200,
+            objects: vec![
+                SynthObject {
+                    share: 0.25,
+                    motion: ObjectMotion::Rotating,
+                },
+                SynthObject {
+                    share: 0.2,
+                    motion: ObjectMotion::Translating,
+                },
+            ],
+            ..Default::default()
+        };
+        let s = generate(&cfg).unwrap();
+        let count = |k: usize| s.objects.iter().filter(|&&o| o == k).count();
+        assert_eq!((count(0), count(1), count(2)), (110, 50, 40));
+        let w = s.table.measurements().w;
+        let sv = |cols: &[usize]| {
+            let m = cols.len() as f64;
+            let x = faer::Mat::from_fn(w.nrows(), cols.len(), |r, j| {
+                w[(r, cols[j])] - cols.iter().map(|&c| w[(r, c)]).sum::<f64>() / m
+            });
+            x.singular_values().unwrap()
+        };
+        let of = |k: usize| (0..200).filter(|&p| s.objects[p] == k).collect::<Vec<_>>();
+        for (k, rank) in [(0, 3), (1, 3), (2, 2)] {
+            let v = sv(&of(k));
+            assert!(v[rank] < 1e-8 * v[0], "object {k}: {:?}", &v[..4]);
+            assert!(v[rank - 1] > 1e-3 * v[0], "object {k}: {:?}", &v[..4]);
+        }
+        let mut u = of(0);
+        u.extend(of(1));
+        let v = sv(&u);
+        assert!(v[3] > 1e-3 * v[0], "union of two objects: {:?}", &v[..5]);
+    }
 
     #[test]
     fn noise_free_complete_scene_matches_truth() {

@@ -102,6 +102,10 @@ pub struct SegmentConfig {
     pub neighbours: usize,
     /// Groups with fewer tracks are dissolved. Default 6 (at least 4: a subspace needs 4).
     pub min_group_tracks: usize,
+    /// Growth steps of each hypothesis: refits to the tracks within 3σ of it, so that a
+    /// hypothesis from a local patch extends to the whole body around it (both the local
+    /// and the grown fit enter the pool; 0 = local fits only). Default 2.
+    pub grow_steps: usize,
     /// Maximum assign/refit rounds. Default 12.
     pub rounds: usize,
     /// ALS sweeps per refit. Default 15.
@@ -134,6 +138,7 @@ impl Default for SegmentConfig {
             hypotheses: 400,
             neighbours: 12,
             min_group_tracks: 6,
+            grow_steps: 2,
             rounds: 12,
             refit_sweeps: 15,
             label_cost_scale: 8.0,
@@ -473,14 +478,44 @@ pub fn segment<R: Rng + ?Sized>(
         .filter_map(|_| local_sample(&ts, &eligible, &nbrs, rng))
         .collect();
     let sweeps = cfg.refit_sweeps;
+    let grow = cfg.grow_steps;
     let fitted: Vec<Fitted> = samples
         .par_iter()
-        .filter_map(|set| {
-            let m0 = ts.fit(&set[..4])?;
-            let m = ts.refit_with(&m0, set, sweeps)?;
-            let chi = info.chi(&m);
-            let s2 = info.sigma2_of(&m, &chi, set)?;
-            Some((m, chi, s2))
+        .flat_map_iter(|set| {
+            let mut out = Vec::new();
+            let local = (|| {
+                let m0 = ts.fit(&set[..4])?;
+                let m = ts.refit_with(&m0, set, sweeps)?;
+                let chi = info.chi(&m);
+                let s2 = info.sigma2_of(&m, &chi, set)?;
+                Some((m, chi, s2))
+            })();
+            let Some(mut cur) = local else { return out };
+            out.push(cur.clone());
+            // Growth: refit to every track within 3σ of the local fit (and the local set).
+            for _ in 0..grow {
+                let (m, chi, s2) = &cur;
+                let inl: Vec<usize> = (0..n)
+                    .filter(|&p| {
+                        set.contains(&p)
+                            || chi[p].is_some_and(|c| info.nu[p] > 0.0 && c / info.nu[p] < 9.0 * s2)
+                    })
+                    .collect();
+                let next = (|| {
+                    let m2 = ts.refit_with(m, &inl, sweeps)?;
+                    let chi2 = info.chi(&m2);
+                    let s22 = info.sigma2_of(&m2, &chi2, &inl)?;
+                    Some((m2, chi2, s22))
+                })();
+                match next {
+                    Some(nx) => cur = nx,
+                    None => break,
+                }
+            }
+            if grow > 0 {
+                out.push(cur);
+            }
+            out
         })
         .collect();
     if fitted.is_empty() {
@@ -498,7 +533,7 @@ pub fn segment<R: Rng + ?Sized>(
         pool.push(m, chi, s2);
     }
 
-    let fixed = matches!(cfg.objects, Objects::Count(_));
+    let given = matches!(cfg.objects, Objects::Count(_));
     let lambda = cfg.label_cost_scale * (n_obs.max(2) as f64).ln();
     let outlier: Vec<f64> = (0..n)
         .map(|p| 2.0 * info.k[p] * (area / (2.0 * std::f64::consts::PI)).ln())
@@ -512,117 +547,141 @@ pub fn segment<R: Rng + ?Sized>(
     let mut energy = f64::INFINITY;
     let mut rounds = 0;
     let mut converged = false;
-    for _ in 0..cfg.rounds.max(1) {
-        rounds += 1;
-        let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
-        let picked = choose(&costs, &chosen, cfg);
-        let e_picked = costs.energy(&picked);
-        // 4. Refit each chosen subspace to its tracks; its σ² from them.
-        let (_, who) = costs.assign(&picked);
-        let groups: Vec<Vec<usize>> = (0..picked.len())
-            .map(|i| (0..n).filter(|&p| who[p] == i).collect())
-            .collect();
-        let refits: Vec<Option<Fitted>> = picked
-            .par_iter()
-            .zip(&groups)
-            .map(|(&h, g)| {
-                let m = ts.refit_with(&pool.models[h], g, sweeps)?;
-                let chi = info.chi(&m);
-                let s2 = info.sigma2_of(&m, &chi, g)?;
-                Some((m, chi, s2))
-            })
-            .collect();
-        let mut next = Vec::with_capacity(picked.len());
-        for (i, r) in refits.into_iter().enumerate() {
-            match r {
-                Some((m, chi, s2)) => next.push(pool.push(m, chi, s2)),
-                None => next.push(picked[i]),
-            }
-        }
-        let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
-        let e_next = costs.energy(&next);
-        // Keep the refits when they lower the energy (they fit their tracks at least as
-        // well); stop when a round gains nothing.
-        let (mut set, mut e) = if e_next <= e_picked {
-            (next, e_next)
-        } else {
-            (picked, e_picked)
+    // With a given count the automatic solution is found first, then brought to the
+    // count (merges of the cheapest pairs, or additions) and refined with the count fixed:
+    // forcing K labels from an empty set lands in poor local minima (measured: 16 % mean
+    // error on the three-motion Hopkins files, against 8 % this way).
+    let phases: Vec<Objects> = match cfg.objects {
+        Objects::Auto => vec![Objects::Auto],
+        Objects::Count(k) => vec![Objects::Auto, Objects::Count(k)],
+    };
+    for objects in phases {
+        let fixed = matches!(objects, Objects::Count(_));
+        let target = match objects {
+            Objects::Count(k) => Some(k),
+            Objects::Auto => None,
         };
-        // 5. Merges: a pair of groups replaced by one subspace refitted to both, when that
-        //    lowers the energy (two pieces of one body, e.g. found on different frames).
-        if !fixed || cfg.objects != Objects::Count(set.len()) {
-            loop {
-                let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
-                let (_, who) = costs.assign(&set);
-                let pairs: Vec<(usize, usize)> = (0..set.len())
-                    .flat_map(|i| (i + 1..set.len()).map(move |j| (i, j)))
-                    .collect();
-                let merged: Vec<Option<(usize, usize, Fitted)>> = pairs
-                    .par_iter()
-                    .map(|&(i, j)| {
-                        let union: Vec<usize> =
-                            (0..n).filter(|&p| who[p] == i || who[p] == j).collect();
-                        let m = ts.refit_with(&pool.models[set[i]], &union, sweeps)?;
-                        let chi = info.chi(&m);
-                        let s2 = info.sigma2_of(&m, &chi, &union)?;
-                        Some((i, j, (m, chi, s2)))
-                    })
-                    .collect();
-                let mut best: Option<(f64, Vec<usize>)> = None;
-                for (i, j, (m, chi, s2)) in merged.into_iter().flatten() {
-                    let h = pool.push(m, chi, s2);
-                    let mut t: Vec<usize> = set
-                        .iter()
-                        .enumerate()
-                        .filter(|&(k, _)| k != i && k != j)
-                        .map(|(_, &g)| g)
-                        .collect();
-                    t.push(h);
+        energy = f64::INFINITY;
+        converged = false;
+        for _ in 0..cfg.rounds.max(1) {
+            rounds += 1;
+            let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
+            let picked = choose(&costs, &chosen, cfg, objects);
+            let e_picked = costs.energy(&picked);
+            // 4. Refit each chosen subspace to its tracks; its σ² from them.
+            let (_, who) = costs.assign(&picked);
+            let groups: Vec<Vec<usize>> = (0..picked.len())
+                .map(|i| (0..n).filter(|&p| who[p] == i).collect())
+                .collect();
+            let refits: Vec<Option<Fitted>> = picked
+                .par_iter()
+                .zip(&groups)
+                .map(|(&h, g)| {
+                    let m = ts.refit_with(&pool.models[h], g, sweeps)?;
+                    let chi = info.chi(&m);
+                    let s2 = info.sigma2_of(&m, &chi, g)?;
+                    Some((m, chi, s2))
+                })
+                .collect();
+            let mut next = Vec::with_capacity(picked.len());
+            for (i, r) in refits.into_iter().enumerate() {
+                match r {
+                    Some((m, chi, s2)) => next.push(pool.push(m, chi, s2)),
+                    None => next.push(picked[i]),
+                }
+            }
+            let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
+            let e_next = costs.energy(&next);
+            // Keep the refits when they lower the energy (they fit their tracks at least as
+            // well); stop when a round gains nothing.
+            let (mut set, mut e) = if e_next <= e_picked {
+                (next, e_next)
+            } else {
+                (picked, e_picked)
+            };
+            // 5. Merges: a pair of groups replaced by one subspace refitted to both, when that
+            //    lowers the energy (two pieces of one body, e.g. found on different frames), or,
+            //    with a given count still exceeded, the merge that raises it least.
+            if !fixed || target.is_some_and(|k| set.len() > k) {
+                loop {
+                    let forced = target.is_some_and(|k| set.len() > k);
+                    if fixed && !forced {
+                        break;
+                    }
                     let costs =
                         Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
-                    let et = costs.energy(&t);
-                    if et < e && best.as_ref().is_none_or(|b| et < b.0) {
-                        best = Some((et, t));
+                    let (_, who) = costs.assign(&set);
+                    let pairs: Vec<(usize, usize)> = (0..set.len())
+                        .flat_map(|i| (i + 1..set.len()).map(move |j| (i, j)))
+                        .collect();
+                    let merged: Vec<Option<(usize, usize, Fitted)>> = pairs
+                        .par_iter()
+                        .map(|&(i, j)| {
+                            let union: Vec<usize> =
+                                (0..n).filter(|&p| who[p] == i || who[p] == j).collect();
+                            let m = ts.refit_with(&pool.models[set[i]], &union, sweeps)?;
+                            let chi = info.chi(&m);
+                            let s2 = info.sigma2_of(&m, &chi, &union)?;
+                            Some((i, j, (m, chi, s2)))
+                        })
+                        .collect();
+                    let mut best: Option<(f64, Vec<usize>)> = None;
+                    for (i, j, (m, chi, s2)) in merged.into_iter().flatten() {
+                        let h = pool.push(m, chi, s2);
+                        let mut t: Vec<usize> = set
+                            .iter()
+                            .enumerate()
+                            .filter(|&(k, _)| k != i && k != j)
+                            .map(|(_, &g)| g)
+                            .collect();
+                        t.push(h);
+                        let costs =
+                            Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
+                        let et = costs.energy(&t);
+                        if (forced || et < e) && best.as_ref().is_none_or(|b| et < b.0) {
+                            best = Some((et, t));
+                        }
+                    }
+                    match best {
+                        Some((et, t)) => {
+                            set = t;
+                            e = et;
+                        }
+                        None => break,
                     }
                 }
-                match best {
-                    Some((et, t)) => {
-                        set = t;
-                        e = et;
+            }
+            chosen = set;
+            if shared.is_some() {
+                let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
+                let (_, who) = costs.assign(&chosen);
+                let (mut ss, mut dof) = (0.0, 0.0);
+                for p in 0..n {
+                    if who[p] != usize::MAX {
+                        ss += pool.chi[chosen[who[p]]][p] as f64;
+                        dof += info.nu[p];
                     }
-                    None => break,
+                }
+                dof -= chosen
+                    .iter()
+                    .map(|&h| (8.0 * pool.defined_frames[h] as f64 - 9.0).max(0.0))
+                    .sum::<f64>();
+                if dof >= 1.0 {
+                    let s2 = (ss / dof).clamp(info.sigma2_floor, info.sigma2_max);
+                    shared = Some(s2);
+                    e = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed)
+                        .energy(&chosen);
                 }
             }
-        }
-        chosen = set;
-        if shared.is_some() {
-            let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
-            let (_, who) = costs.assign(&chosen);
-            let (mut ss, mut dof) = (0.0, 0.0);
-            for p in 0..n {
-                if who[p] != usize::MAX {
-                    ss += pool.chi[chosen[who[p]]][p] as f64;
-                    dof += info.nu[p];
-                }
+            if !(e < energy - 1e-9 * energy.abs().max(1.0)) && energy.is_finite() {
+                energy = e.min(energy);
+                converged = true;
+                break;
             }
-            dof -= chosen
-                .iter()
-                .map(|&h| (8.0 * pool.defined_frames[h] as f64 - 9.0).max(0.0))
-                .sum::<f64>();
-            if dof >= 1.0 {
-                let s2 = (ss / dof).clamp(info.sigma2_floor, info.sigma2_max);
-                shared = Some(s2);
-                e = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed)
-                    .energy(&chosen);
-            }
+            energy = e;
         }
-        if !(e < energy - 1e-9 * energy.abs().max(1.0)) && energy.is_finite() {
-            energy = e.min(energy);
-            converged = true;
-            break;
-        }
-        energy = e;
     }
+    let fixed = given;
 
     // Final labels and groups, largest first.
     let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
@@ -680,9 +739,9 @@ pub fn segment<R: Rng + ?Sized>(
 
 /// Label set search (step 3): greedy additions, then removals and swaps, each accepted
 /// only when it lowers the energy; groups below `min_group_tracks` are never kept.
-fn choose(costs: &Costs<'_>, start: &[usize], cfg: &SegmentConfig) -> Vec<usize> {
+fn choose(costs: &Costs<'_>, start: &[usize], cfg: &SegmentConfig, objects: Objects) -> Vec<usize> {
     let h_all = costs.pool.models.len();
-    let (target, cap) = match cfg.objects {
+    let (target, cap) = match objects {
         Objects::Count(k) => (Some(k), k),
         Objects::Auto => (None, cfg.max_objects),
     };
