@@ -727,12 +727,14 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthScene> {
     }
     // Their motions: object j turns about its own axis (or not), starts beside the main
     // object and drifts.
-    let object_motion: Vec<(
+    // (axis, total turn in radians, image offset, image drift) per object.
+    type Path = (
         nalgebra::Unit<Vector3<f64>>,
         f64,
         Vector2<f64>,
         Vector2<f64>,
-    )> = cfg
+    );
+    let object_motion: Vec<Path> = cfg
         .objects
         .iter()
         .enumerate()
