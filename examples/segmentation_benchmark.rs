@@ -27,6 +27,8 @@ struct Row {
     error_k: f64,
     outliers_auto: usize,
     seconds: f64,
+    single_seconds: f64,
+    objects_seconds: f64,
 }
 
 fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
@@ -122,8 +124,18 @@ fn main() {
     files.sort();
     let mut rows = Vec::new();
     println!(
-        "{:<16} {:>3} {:>5} {:>4} | {:>8} {:>6} {:>5} | {:>8} | {:>7}",
-        "sequence", "F", "P", "G", "err auto", "K", "outl", "err K", "s"
+        "{:<16} {:>3} {:>5} {:>4} | {:>8} {:>6} {:>5} | {:>8} | {:>7} {:>8} {:>9}",
+        "sequence",
+        "F",
+        "P",
+        "G",
+        "err auto",
+        "K",
+        "outl",
+        "err K",
+        "seg s",
+        "single s",
+        "objects s"
     );
     for path in &files {
         let name = path.file_stem().unwrap().to_string_lossy().to_string();
@@ -133,6 +145,27 @@ fn main() {
         let h = datasets::read_hopkins(path).expect("read");
         let (auto, secs) = run(&h, Objects::Auto, seed);
         let (given, _) = run(&h, Objects::Count(h.n_groups), seed);
+        // Time against the single-object pipeline (default configuration), and the whole
+        // multi-object run (segmentation plus one reconstruction per group).
+        let table = rank3::TrackTable::from_measurements(&h.measurements);
+        let config = rank3::Config::default();
+        let t = Instant::now();
+        let single = rank3::Reconstruction::from_tracks(&table, &config);
+        let single_seconds = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let seg_cfg = SegmentConfig {
+            image_area: Some(h.image_size.0 * h.image_size.1),
+            ..Default::default()
+        };
+        let multi = rank3::objects::reconstruct_objects(&table, &config, &seg_cfg);
+        let objects_seconds = t.elapsed().as_secs_f64();
+        if single.is_err() || multi.is_err() {
+            eprintln!(
+                "{name}: single {:?} / objects {:?}",
+                single.err(),
+                multi.err()
+            );
+        }
         let row = Row {
             name: name.clone(),
             groups: h.n_groups,
@@ -141,9 +174,11 @@ fn main() {
             error_k: misclassification(&given.codes(), &h.groups),
             outliers_auto: auto.n_outliers(),
             seconds: secs,
+            single_seconds,
+            objects_seconds,
         };
         println!(
-            "{:<16} {:>3} {:>5} {:>4} | {:>7.2}% {:>6} {:>5} | {:>7.2}% | {:>7.2}   σ {:.3}",
+            "{:<16} {:>3} {:>5} {:>4} | {:>7.2}% {:>6} {:>5} | {:>7.2}% | {:>7.2} {:>8.2} {:>9.2}   σ {:.3}",
             row.name,
             h.measurements.n_frames(),
             h.measurements.n_points(),
@@ -153,6 +188,8 @@ fn main() {
             row.outliers_auto,
             100.0 * row.error_k,
             row.seconds,
+            row.single_seconds,
+            row.objects_seconds,
             auto.sigma
         );
         rows.push(row);
@@ -171,6 +208,12 @@ fn main() {
             sel.len(),
             100.0 * sel.iter().map(|r| r.error_k).sum::<f64>() / m,
             100.0 * rank3::eval::median(&sel.iter().map(|r| r.error_auto).collect::<Vec<_>>()),
+        );
+        println!(
+            "{g} motions: time, segmentation {:.2} s, single-object pipeline {:.2} s, segmentation + one reconstruction per object {:.2} s (sums over the files)",
+            sel.iter().map(|r| r.seconds).sum::<f64>(),
+            sel.iter().map(|r| r.single_seconds).sum::<f64>(),
+            sel.iter().map(|r| r.objects_seconds).sum::<f64>(),
         );
     }
 
