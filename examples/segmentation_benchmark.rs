@@ -49,6 +49,7 @@ fn run(h: &Hopkins, objects: Objects, seed: u64) -> (rank3::segment::Segmentatio
         hypotheses: env_or("HYPOTHESES", SegmentConfig::default().hypotheses),
         neighbours: env_or("NEIGHBOURS", SegmentConfig::default().neighbours),
         grow_steps: env_or("GROW", SegmentConfig::default().grow_steps),
+        smoothness: env_or("SMOOTH", SegmentConfig::default().smoothness),
         ..Default::default()
     };
     let t = Instant::now();
