@@ -191,6 +191,14 @@ pub struct RobustReport {
     /// Flagged entries as (frame, track) indices into the input table.
     #[serde(skip)]
     pub flagged_indices: Vec<(usize, usize)>,
+    /// Rigid groups the affine pass saw: 1 (the body reconstructed) plus the other rigid
+    /// objects found among the tracks it rejected or flagged
+    /// ([`crate::segment::other_objects`]; 1 when `separate_objects` is off or the pass
+    /// found no majority).
+    pub rigid_groups_seen: usize,
+    /// Tracks the affine pass had kept (with flagged entries) that belong to another rigid
+    /// object, rejected whole (they are in `outlier_tracks`).
+    pub other_object_tracks: usize,
     pub seconds: f64,
 }
 
@@ -847,6 +855,8 @@ impl Reconstruction {
         let mut robust_report = None;
         let mut inlier = vec![true; kept.n_tracks()];
         let mut flagged: Vec<(usize, usize)> = Vec::new();
+        // Other rigid objects the affine pass found (tracks of `kept`).
+        let mut other_groups: Vec<Vec<usize>> = Vec::new();
         if let Some(rc) = &config.robust {
             let mut rng = rand::rngs::StdRng::seed_from_u64(config.seed);
             let t0 = Instant::now();
@@ -858,7 +868,8 @@ impl Reconstruction {
                 };
                 robust::robust_filter_observed(&meas_all, rc, &mut rng, &mut capture)
             })?;
-            let seconds = t0.elapsed().as_secs_f64();
+            let (mut groups_seen, mut other_object_tracks) = (1usize, 0usize);
+            other_groups.clear();
             if let robust::Verdict::NoRigidMajority {
                 reason,
                 inlier_fraction,
@@ -885,7 +896,36 @@ impl Reconstruction {
             } else {
                 inlier.clone_from(&r.inlier_tracks);
                 flagged.clone_from(&r.flagged_entries);
+                if rc.separate_objects
+                    && let Some(model) = &r.model
+                {
+                    // Another rigid object's tracks pass the trimmed track test with many
+                    // entries flagged: find such objects among the rejected and flagged
+                    // tracks and reject their tracks whole.
+                    let mut n_flagged = vec![0usize; kept.n_tracks()];
+                    flagged.iter().for_each(|&(_, p)| n_flagged[p] += 1);
+                    let candidates: Vec<usize> = (0..kept.n_tracks())
+                        .filter(|&p| !inlier[p] || n_flagged[p] > 0)
+                        .collect();
+                    let groups = crate::segment::other_objects(
+                        &meas_all,
+                        model,
+                        &candidates,
+                        &crate::segment::SegmentConfig::default(),
+                        &mut rng,
+                    )?;
+                    groups_seen += groups.len();
+                    other_groups.clone_from(&groups);
+                    for &p in groups.iter().flatten() {
+                        if inlier[p] {
+                            inlier[p] = false;
+                            other_object_tracks += 1;
+                        }
+                    }
+                    flagged.retain(|&(_, p)| inlier[p]);
+                }
             }
+            let seconds = t0.elapsed().as_secs_f64();
             let mut report = RobustReport {
                 outlier_tracks: Vec::new(),
                 flagged_entries: Vec::new(),
@@ -899,6 +939,8 @@ impl Reconstruction {
                 projective: None,
                 inliers_per_iteration: counts,
                 flagged_indices: Vec::new(),
+                rigid_groups_seen: groups_seen,
+                other_object_tracks,
                 seconds,
             };
             report.update(&kept, &kept_frames, &kept_tracks, &inlier, &flagged);
@@ -965,6 +1007,19 @@ impl Reconstruction {
             }
             let (sigma, tau) = last.unwrap_or((f64::NAN, f64::NAN));
             report.update(&kept, &kept_frames, &kept_tracks, &inlier, &flagged);
+            // A group the projective model mostly readmits was a part of the body seen in
+            // perspective, not another object.
+            for g in &other_groups {
+                let back = g.iter().filter(|&&p| inlier[p]).count();
+                if 2 * back > g.len() {
+                    report.rigid_groups_seen -= 1;
+                }
+                report.other_object_tracks -= g
+                    .iter()
+                    .filter(|&&p| inlier[p] && !before[p])
+                    .count()
+                    .min(report.other_object_tracks);
+            }
             report.noise_sigma_px = sigma;
             report.entry_threshold_px = tau;
             report.projective = Some(ProjectiveJudgement {

@@ -164,6 +164,11 @@ pub struct RobustConfig {
     /// runs only when the rejected tracks number at least `max_rival_ratio` × the inliers.
     /// Default 300.
     pub rival_max_iterations: usize,
+    /// Look for other rigid objects among the rejected and flagged tracks
+    /// ([`crate::segment::other_objects`]) and reject the tracks of each as whole tracks,
+    /// never patched entry by entry (used by [`crate::Reconstruction`]'s pipeline, which
+    /// reports the groups seen). Default true.
+    pub separate_objects: bool,
 }
 
 impl Default for RobustConfig {
@@ -185,6 +190,7 @@ impl Default for RobustConfig {
             max_relative_noise: 0.05,
             rival_search: true,
             rival_max_iterations: 300,
+            separate_objects: true,
         }
     }
 }

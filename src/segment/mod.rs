@@ -743,11 +743,22 @@ pub fn segment<R: Rng + ?Sized>(
         .collect();
     let mut objects = Vec::with_capacity(groups.len());
     let (mut ss_all, mut dof_all) = (0.0, 0.0);
-    for (k, (h, tracks)) in groups.into_iter().enumerate() {
+    // Each group's subspace and noise refitted to its final tracks (the labels stay).
+    let finals: Vec<(AffineSubspace, Vec<Option<f64>>, f64)> = groups
+        .par_iter()
+        .map(|(h, tracks)| {
+            let m = ts
+                .refit_with(&pool.models[*h], tracks, sweeps)
+                .unwrap_or_else(|| pool.models[*h].clone());
+            let chi = info.chi(&m);
+            let s2 = info.sigma2_of(&m, &chi, tracks).unwrap_or(pool.sigma2[*h]);
+            (m, chi, s2)
+        })
+        .collect();
+    for (k, ((_, tracks), (model, chi, s2))) in groups.into_iter().zip(finals).enumerate() {
         for &p in &tracks {
             labels[p] = Label::Object(k);
         }
-        let chi = info.chi(&pool.models[h]);
         let ss: f64 = tracks.iter().filter_map(|&p| chi[p]).sum();
         let dof: f64 = tracks.iter().map(|&p| info.nu[p]).sum();
         ss_all += ss;
@@ -755,8 +766,8 @@ pub fn segment<R: Rng + ?Sized>(
         objects.push(ObjectGroup {
             tracks,
             rms: (ss / dof.max(1.0)).sqrt(),
-            sigma: pool.sigma2[h].sqrt(),
-            model: pool.models[h].clone(),
+            sigma: s2.sqrt(),
+            model,
         });
     }
     Ok(Segmentation {
@@ -1071,4 +1082,71 @@ fn best_matching(conf: &[Vec<usize>], kf: usize, kt: usize) -> usize {
         best
     }
     rec(0, 0, conf, kf, kt)
+}
+
+/// Other rigid objects among `candidates` (track indices into `meas`, e.g. the tracks a
+/// robust pass rejected or flagged), given the main body's subspace `main`: the groups of
+/// [`segment`] run on the candidates alone that `main` explains worse than their own
+/// subspace by more than a label cost, `Σ_p ν_p (r²_p,main − r²_p,own) / σ² >
+/// c (8F_g − 9) ln n` (the energy of the module documentation: keeping the group separate
+/// beats merging it into the main body). Tracks of the main body that were flagged for a
+/// few gross entries fit `main` as well as any subspace and are never returned. Returns the
+/// groups as track indices into `meas`, largest first (empty when there are fewer than
+/// `2 · min_group_tracks` candidates or no group passes).
+///
+/// Complexity: that of [`segment`] on the candidates, plus O(n_obs) for the comparisons.
+pub fn other_objects<R: Rng + ?Sized>(
+    meas: &Measurements,
+    main: &AffineSubspace,
+    candidates: &[usize],
+    cfg: &SegmentConfig,
+    rng: &mut R,
+) -> Result<Vec<Vec<usize>>> {
+    cfg.validate()?;
+    if candidates.len() < 2 * cfg.min_group_tracks {
+        return Ok(Vec::new());
+    }
+    let (f, n_all) = (meas.n_frames(), meas.n_points());
+    let sub = Measurements::new(
+        faer::Mat::from_fn(2 * f, candidates.len(), |r, j| meas.w[(r, candidates[j])]),
+        (0..f)
+            .flat_map(|fr| {
+                candidates
+                    .iter()
+                    .map(move |&p| meas.visible[fr * n_all + p])
+            })
+            .collect(),
+    );
+    let seg = match segment(&sub, cfg, rng) {
+        Ok(s) => s,
+        Err(Error::TooFew { .. }) | Err(Error::Degenerate(_)) => return Ok(Vec::new()),
+        Err(e) => return Err(e),
+    };
+    let ts_all = TrackSubspace::new(meas, &cfg.subspace);
+    let ts_sub = TrackSubspace::new(&sub, &cfg.subspace);
+    let n_obs: usize = (0..n_all).map(|p| 2 * ts_all.frames_of(p).len()).sum();
+    let lambda = cfg.label_cost_scale * (n_obs.max(2) as f64).ln();
+    let s2 = (seg.sigma * seg.sigma).max(1e-12);
+    let mut out = Vec::new();
+    for g in &seg.objects {
+        let mut gain = 0.0;
+        for &c in &g.tracks {
+            let own = ts_sub.track_fit(&g.model, c);
+            let in_main = ts_all.track_fit(main, candidates[c]);
+            match (own, in_main) {
+                (Some(o), Some(m)) => {
+                    let nu = (2.0 * o.kept as f64 - 3.0).max(0.0);
+                    gain += nu * (m.rms * m.rms - o.rms * o.rms) / s2;
+                }
+                // Not scorable by the main body at all: as far from it as can be.
+                (Some(o), None) => gain += (2.0 * o.kept as f64 - 3.0).max(0.0) * 9.0,
+                _ => {}
+            }
+        }
+        let beta = lambda * (8.0 * g.model.n_defined() as f64 - 9.0).max(0.0);
+        if gain > beta {
+            out.push(g.tracks.iter().map(|&c| candidates[c]).collect());
+        }
+    }
+    Ok(out)
 }
