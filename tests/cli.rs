@@ -558,7 +558,7 @@ fn projective_camera_end_to_end() {
     }
 }
 
-/// `reconstruct --objects auto` on two rigid bodies moving independently (orthographic
+/// `reconstruct --objects auto` on two rigid bodies moving independently (50 and 35 tracks; orthographic
 /// camera, 0.3 px noise) plus random-walk tracks: two objects found with their tracks,
 /// the walks labelled −1, one reconstruction per object on its own tracks.
 #[test]
@@ -568,7 +568,7 @@ fn objects_are_segmented_and_reconstructed_each() {
     let d = tmp("objects");
     let mut rng = rand::rngs::StdRng::seed_from_u64(11);
     let g = Normal::new(0.0, 1.0).unwrap();
-    let (frames, sizes, walks) = (24usize, [40usize, 25], 3usize);
+    let (frames, sizes, walks) = (24usize, [50usize, 35], 3usize);
     let mut csv = String::from("frame,track,x,y\n");
     let mut truth = Vec::new();
     let mut track = 0;
