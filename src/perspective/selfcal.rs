@@ -40,7 +40,7 @@
 //!    reflection `(X, t) → (−X, −t)` is applied if most points would lie behind their
 //!    cameras (cheirality).
 //! 4. The nonlinear refinement is the metric bundle adjustment that follows
-//!    ([`super::upgrade`]): the maximum-likelihood estimate of the focal length(s), poses and
+//!    ([`upgrade`]): the maximum-likelihood estimate of the focal length(s), poses and
 //!    points under the camera model.
 //!
 //! # Complexity

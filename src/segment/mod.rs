@@ -11,27 +11,28 @@
 //!
 //! Multi-model fitting with label costs (Delong, Osokin, Isack & Boykov, "Fast approximate
 //! energy minimization with label costs", IJCV 96(1), 2012; Isack & Boykov, "Energy-based
-//! geometric multi-model fitting" (PEARL), IJCV 97(2), 2012), here without a smoothness
-//! term:
+//! geometric multi-model fitting" (PEARL), IJCV 97(2), 2012), without a smoothness term by
+//! default:
 //!
 //! ```text
 //! E(L, {M_g}) = Σ_p D_p(L_p) + Σ_{g used} β_g,
-//!   D_p(g)       = ν_p r²_pg / σ²                  (the track's χ² under subspace g)
-//!   D_p(outlier) = 2 k_p ln(A / (2π σ²))           (a track uniform over the image)
-//!   β_g          = (8 F_g − 9) ln n                (BIC cost of one subspace)
+//!   D_p(g)       = ν_p r²_pg / σ² + 2 k_p ln σ²     (−2 ln of a Gaussian track)
+//!   D_p(outlier) = 2 k_p ln(A / 2π)                 (−2 ln of a track uniform on the image)
+//!   β_g          = c (8 F_g − 9) ln n               (c × the BIC cost of one subspace)
 //! ```
 //!
 //! with `r_pg` the per-coordinate RMS of track `p`'s trimmed least-squares fit to subspace
 //! `g` ([`TrackSubspace::track_fit`]: a few gross entries per track are tolerated), `k_p`
 //! the track's frames, `ν_p = 2k_p − 3` its degrees of freedom, `σ` the noise per
-//! coordinate, `A` the image area (the tracks' bounding box when the image size is not
-//! given), `F_g` the frames on which subspace `g` is defined, `8F_g − 9` the dimension
-//! of the set of 3-dimensional affine subspaces of `R^{2F_g}` and `n` the number of
-//! observed coordinates. `D_p(outlier) − D_p(g)` is the log-likelihood ratio of a
-//! uniform track against a Gaussian one (both in `−2 ln` units, as the χ²), so `E` is a
-//! BIC: one more object must pay for its parameters, a track is an outlier when no
-//! subspace explains it better than chance. With `--objects K` the number of labels is
-//! fixed at `K` and `β` is not used.
+//! coordinate (one for all groups: the tracker's; [`SegmentConfig::shared_noise`]), `A`
+//! the image area (the tracks' bounding box when the image size is not given), `F_g` the
+//! frames on which subspace `g` is defined, `8F_g − 9` the dimension of the set of
+//! 3-dimensional affine subspaces of `R^{2F_g}`, `n` the number of observed coordinates
+//! and `c` = [`SegmentConfig::label_cost_scale`] (8, chosen by measurement: `c = 1`
+//! splits real bodies, which affine subspaces do not fit exactly, into several). `E` is a
+//! (scaled) BIC: one more object must pay for its parameters, and a track is an outlier
+//! when no subspace explains it better than chance. With [`Objects::Count`] the number of
+//! labels is fixed and `β` is not used.
 //!
 //! # Method
 //!
@@ -40,33 +41,39 @@
 //!    since the tracks near a track in every frame are most likely on the same body: a
 //!    minimal 4-track fit on frames they share, then an ALS refit of the whole local
 //!    set over all frames it covers ([`TrackSubspace::refit_with`]; missing entries are
-//!    simply not in the sums). Local sampling is what makes small objects reachable: a
-//!    uniform 4-track sample hits an object holding 10 % of the tracks with probability
-//!    10⁻⁴.
-//! 2. **Noise** `σ`: first the median of every track's best residual over the
-//!    hypotheses, then, each round, from the residuals of the tracks to the subspace they
-//!    are assigned to ([`crate::robust::ransac::Estimator::sigma_from_residuals`]).
-//! 3. **Labels**: for a fixed set of subspaces the optimal labelling is per track
+//!    simply not in the sums), then `grow_steps` refits to every track within 3σ_h of it
+//!    (`σ_h²` = the residual sum over its degrees of freedom, the subspace's own
+//!    parameters counted). Both the local and the grown fit enter the pool. Local sampling
+//!    is what makes small objects reachable: a uniform 4-track sample hits an object
+//!    holding 10 % of the tracks with probability 10⁻⁴.
+//! 2. **Labels**: for a fixed set of subspaces the optimal labelling is per track
 //!    (`argmin_g D_p(g)`); choosing the set is uncapacitated facility location, solved
 //!    greedily (add the hypothesis that lowers `E` most, while one does), then improved by
 //!    removals and single swaps.
-//! 4. **Refit** every chosen subspace to its tracks (ALS over all frames), add the refits
-//!    to the pool and go back to 2, until `E` stops decreasing or `rounds` is reached.
-//!    Every step lowers `E` for fixed `σ` (assignment and swaps by construction; the
-//!    refit is a least-squares fit of the tracks assigned), the PEARL argument.
+//! 3. **Refit** every chosen subspace to its tracks (ALS over all frames) and add the
+//!    refits to the pool; **merge** pairs of groups when one subspace refitted to both
+//!    lowers `E` (two pieces of one body, e.g. found on different frames); re-pool `σ`
+//!    over the grouped tracks; back to 2 until `E` stops decreasing or `rounds` is reached.
+//!    At fixed σ every step lowers `E` (the PEARL argument).
+//! 4. With [`Objects::Count`] the automatic solution comes first; it is then brought to
+//!    the count by the cheapest merges (or by additions) and refined with the count fixed.
+//! 5. The final groups' subspaces are refitted to their tracks for the report (the labels
+//!    stay).
 //!
-//! Groups with fewer than `min_group_tracks` tracks are dissolved (their tracks go to
-//! their next-best group or become outliers). Tracks seen in fewer than
-//! `subspace.min_overlap` frames cannot be scored and are labelled
-//! [`Label::Unscored`].
+//! Groups with fewer than `min_group_tracks` tracks are never kept. Tracks seen in fewer
+//! than `subspace.min_overlap` frames cannot be scored and are labelled
+//! [`Label::Unscored`]. The optional Potts term ([`SegmentConfig::smoothness`]) labels by
+//! iterated conditional modes over the image neighbours.
 //!
 //! # Complexity
 //!
 //! With `H` hypotheses, `N` tracks and `n_obs` observations: neighbours O(N² + N·k·F)
-//! (a centroid pre-selection, then trajectory distances on `4k` candidates); residual
-//! table O(H · n_obs) time and O(H · N) memory (f32); each round O(K · H · N) for the
-//! label search plus O(K · n_obs) per ALS sweep of the refits. Nothing is dense in
-//! F×N beyond what [`TrackSubspace`] itself holds.
+//! (a centroid pre-selection, then trajectory distances on `4k` candidates); hypotheses
+//! O(H · (1 + grow_steps) · n_obs) time and a residual table of O(H · N) memory (f32);
+//! each round O(K · H · N) for the label search plus O(K · n_obs) per ALS sweep of the
+//! refits and O(K² · n_obs) for the merge tests. Nothing is dense in F×N beyond what
+//! [`TrackSubspace`] itself holds. The O(N²) neighbour pre-selection dominates beyond
+//! ~10⁴ tracks (see the long-video issue for a spatial index).
 
 use std::time::Instant;
 
