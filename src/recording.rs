@@ -2080,9 +2080,9 @@ const OBJECT_COLOURS: [[u8; 3]; 8] = [
     [140, 86, 75],
 ];
 
-/// Logs a multi-object result ([`crate::objects`]): the input tracks, then per frame each
-/// object's tracks in its colour on `image/objects/<k>` and the outlier tracks in red on
-/// `image/objects/outliers`; each reconstructed object's points and cameras (in its own
+/// Logs a multi-object result ([`crate::objects`]): each object's trajectories in its
+/// colour on `image/objects/<k>/trajectories` (stage `input`) and, per frame, its points on
+/// `image/objects/<k>`; the outlier tracks likewise in red under `image/objects/outliers`; each reconstructed object's points and cameras (in its own
 /// frame, which a translation on `objects/<k>` places beside the previous object's, so
 /// that they do not overlap) under `objects/<k>/`; a
 /// markdown summary on `objects/summary`. At stage `result`.
@@ -2093,7 +2093,39 @@ pub fn log_objects(
     table: &TrackTable,
     mb: &crate::objects::MultiBody,
 ) -> RecordingResult {
-    log_input(rec, table)?;
+    // The input's hover labels, then trajectories and per-frame points coloured by object
+    // (not the input's per-track colours).
+    at_stage(rec, "input");
+    if table.n_tracks() <= 65535 {
+        let ctx =
+            AnnotationContext::new(table.track_ids().iter().enumerate().map(|(p, id)| {
+                ClassDescription::from((class_id(p), format!("track {id}").as_str()))
+            }));
+        rec.log_static("image", &ctx)?;
+    }
+    let strips = |tracks: &[usize], colour: [u8; 3]| -> RecordingResult<LineStrips2D> {
+        let (flat, lengths) = trajectories(table, tracks);
+        let mut out = Vec::with_capacity(lengths.len());
+        let mut at = 0;
+        for &len in &lengths {
+            out.push(
+                (0..len)
+                    .map(|i| [flat[2 * (at + i)], flat[2 * (at + i) + 1]])
+                    .collect::<Vec<[f32; 2]>>(),
+            );
+            at += len;
+        }
+        Ok(LineStrips2D::new(out)
+            .with_colors([colour])
+            .with_class_ids(tracks.iter().map(|&p| class_id(p))))
+    };
+    for o in &mb.objects {
+        let colour = OBJECT_COLOURS[o.index % OBJECT_COLOURS.len()];
+        rec.log(
+            format!("image/objects/{}/trajectories", o.index),
+            &strips(&o.tracks, colour)?,
+        )?;
+    }
     at_stage(rec, "result");
     for o in &mb.objects {
         let colour = OBJECT_COLOURS[o.index % OBJECT_COLOURS.len()];
@@ -2111,6 +2143,10 @@ pub fn log_objects(
         .filter(|&p| mb.segmentation.labels[p].code() < 0)
         .collect();
     if !outliers.is_empty() {
+        rec.log(
+            "image/objects/outliers/trajectories",
+            &strips(&outliers, RED)?,
+        )?;
         send_frame_points(
             rec,
             "image/objects/outliers",

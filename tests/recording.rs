@@ -1304,3 +1304,81 @@ fn reconstruct_recorded_perspective_frustums() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `reconstruct --objects auto --rrd`: trajectories and per-frame points coloured by object
+/// in the image view, outliers in red, each object's points and cameras under `objects/<k>`
+/// in their own 3D view, a summary; the viewer's loader accepts the file.
+#[test]
+fn cli_objects_recording() {
+    let dir = std::env::temp_dir().join(format!("rank3-recording-objects-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let d = dir.display().to_string();
+    rank3_ok([
+        "synth",
+        "--out",
+        &format!("{d}/scene"),
+        "--frames",
+        "16",
+        "--points",
+        "120",
+        "--camera",
+        "orthographic",
+        "--objects",
+        "0.35:rotating",
+        "--outliers",
+        "0.05",
+        "--outlier-kind",
+        "random-walk",
+    ]);
+    rank3_ok([
+        "reconstruct",
+        &format!("{d}/scene/tracks.csv"),
+        "--out",
+        &format!("{d}/out"),
+        "--objects",
+        "auto",
+        "--camera",
+        "orthographic",
+        "--rrd",
+        &format!("{d}/run.rrd"),
+    ]);
+    let path = dir.join("run.rrd");
+    let run = read_rrd(&path);
+    for k in 0..2 {
+        assert!(
+            run.get(
+                &format!("image/objects/{k}/trajectories"),
+                "LineStrips2D:strips"
+            )
+            .total()
+                > 20
+        );
+        assert_eq!(
+            run.get(&format!("image/objects/{k}"), "Points2D:positions")
+                .rows(),
+            16
+        );
+        assert!(
+            run.get(&format!("objects/{k}/points"), "Points3D:positions")
+                .total()
+                > 20
+        );
+    }
+    assert_eq!(
+        run.get("image/objects/outliers/trajectories", "LineStrips2D:strips")
+            .total(),
+        6
+    );
+    assert_eq!(run.get("objects/summary", "TextDocument:text").rows(), 1);
+    let (views, _) = saved_layout(&path);
+    assert!(
+        views
+            .iter()
+            .any(|(class, origin)| class == "3D" && origin == "/objects"),
+        "{views:?}"
+    );
+    if let Some(bin) = rerun_cli() {
+        viewer_verifies(&bin, &path);
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
