@@ -110,6 +110,18 @@ pub enum Error {
     /// The data do not determine a solution (e.g. all points collinear).
     #[error("degenerate input: {0}")]
     Degenerate(String),
+    /// An output would overwrite one of the run's inputs (or a file inside an input
+    /// folder); refused before anything is opened or written.
+    #[error(
+        "{what} {} would overwrite the input {}; choose another path",
+        output.display(),
+        input.display()
+    )]
+    OutputIsInput {
+        what: &'static str,
+        output: PathBuf,
+        input: PathBuf,
+    },
     /// A numerical routine failed in a way that is not the user's fault.
     #[error("numerical failure in {stage}: {message}")]
     Numerical {

@@ -139,6 +139,45 @@ struct ReconstructOpts {
     objects: Option<rank3::segment::Objects>,
 }
 
+/// A line on stdout; a closed stdout (`rank3 … | head`) is not an error worth a panic.
+fn say(line: std::fmt::Arguments<'_>) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stdout().lock(), "{line}");
+}
+
+/// Files a run may write in its output folder (checked against the inputs).
+const OUTPUT_FILES: [&str; 6] = [
+    "reconstruction.json",
+    "completed.txt",
+    "points.ply",
+    "tracks.csv",
+    "objects.csv",
+    "segmentation.json",
+];
+
+/// Refuses, before anything is opened, an output (the .rrd, the output file or folder, the
+/// files written in the folder) that would overwrite an input.
+fn refuse_overwriting_inputs(
+    inputs: &[&Path],
+    out_dir: Option<&Path>,
+    out_file: Option<&Path>,
+    rrd: Option<&Path>,
+) -> Result<(), rank3::Error> {
+    let mut outputs: Vec<(&'static str, PathBuf)> = Vec::new();
+    if let Some(r) = rrd {
+        outputs.push(("--rrd", r.to_path_buf()));
+    }
+    if let Some(f) = out_file {
+        outputs.push(("--out", f.to_path_buf()));
+    }
+    if let Some(d) = out_dir {
+        outputs.push(("--out", d.to_path_buf()));
+        outputs.extend(OUTPUT_FILES.iter().map(|n| ("output file", d.join(n))));
+    }
+    let refs: Vec<(&'static str, &Path)> = outputs.iter().map(|(w, p)| (*w, p.as_path())).collect();
+    rank3::output::check_outputs(&refs, inputs)
+}
+
 fn parse_synth_object(item: &str) -> Result<rank3::synth::SynthObject, String> {
     use rank3::synth::{ObjectMotion, SynthObject};
     let (share, motion) = item
@@ -358,6 +397,15 @@ fn main() -> ExitCode {
 }
 
 fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
+    refuse_overwriting_inputs(
+        &[&a.tracks],
+        Some(&a.out),
+        None,
+        #[cfg(feature = "rerun")]
+        a.record.rrd.as_deref(),
+        #[cfg(not(feature = "rerun"))]
+        None,
+    )?;
     #[cfg(feature = "rerun")]
     let recording = a.record.open(
         "rank3",
@@ -640,7 +688,7 @@ fn print_summary(rec: &Reconstruction, out: &Path) {
     }
     let fitted = rec.points.iter().filter(|p| p.inlier).count();
     let outliers = rec.points.len() - fitted;
-    println!(
+    say(format_args!(
         "{} camera, {} frames, {fitted} points fitted{}, RMS {:.6} px{} → {}",
         rec.camera_model,
         rec.frames.len(),
@@ -655,7 +703,7 @@ fn print_summary(rec: &Reconstruction, out: &Path) {
             p.intrinsics.focal_px
         )),
         out.display()
-    );
+    ));
 }
 
 fn synth(a: &SynthArgs) -> Result<(), rank3::Error> {
@@ -705,14 +753,14 @@ fn synth(a: &SynthArgs) -> Result<(), rank3::Error> {
     scene.table.write(&tracks)?;
     let truth = a.out.join("truth.json");
     std::fs::write(&truth, scene.truth_json()).map_err(|e| rank3::Error::io(&truth, e))?;
-    println!(
+    say(format_args!(
         "wrote {} ({} frames × {} tracks, {} observations) and {}",
         tracks.display(),
         scene.table.n_frames(),
         scene.table.n_tracks(),
         scene.table.n_observed(),
         truth.display()
-    );
+    ));
     Ok(())
 }
 // ---------------------------------------------------------------- rank3 track / rank3 run
@@ -981,6 +1029,17 @@ fn track_recorded(
 }
 
 fn track_cmd(a: &TrackArgs) -> Result<(), rank3::Error> {
+    let mut inputs: Vec<&Path> = vec![&a.input];
+    inputs.extend(a.opts.init_points.as_deref());
+    refuse_overwriting_inputs(
+        &inputs,
+        None,
+        Some(&a.out),
+        #[cfg(feature = "rerun")]
+        a.record.rrd.as_deref(),
+        #[cfg(not(feature = "rerun"))]
+        None,
+    )?;
     // Fail on a bad output extension before the (long) tracking.
     rank3::tracks::Format::from_path(&a.out)?;
     let (tracked, _recording) = track_recorded(
@@ -993,14 +1052,14 @@ fn track_cmd(a: &TrackArgs) -> Result<(), rank3::Error> {
     )?;
     let table = tracked.table;
     table.write(&a.out)?;
-    println!(
+    say(format_args!(
         "wrote {} ({} frames × {} tracks, {} observations, {:.1} % filled)",
         a.out.display(),
         table.n_frames(),
         table.n_tracks(),
         table.n_observed(),
         100.0 * table.fill()
-    );
+    ));
     Ok(())
 }
 
@@ -1026,6 +1085,17 @@ impl rank3::Observer for SpinnerObserver {
 }
 
 fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
+    let mut inputs: Vec<&Path> = vec![&a.input];
+    inputs.extend(a.opts.init_points.as_deref());
+    refuse_overwriting_inputs(
+        &inputs,
+        Some(&a.out),
+        None,
+        #[cfg(feature = "rerun")]
+        a.record.rrd.as_deref(),
+        #[cfg(not(feature = "rerun"))]
+        None,
+    )?;
     std::fs::create_dir_all(&a.out).map_err(|e| rank3::Error::io(&a.out, e))?;
     // The table goes in with the reconstruction (reconstruct_recorded logs it).
     #[cfg_attr(not(feature = "rerun"), allow(unused_variables))]

@@ -249,3 +249,32 @@ pub fn write_objects(
     }
     Ok(dirs)
 }
+
+/// Refuses outputs that would overwrite an input, before anything is opened or written:
+/// an output path that is one of `inputs` (the same file, through any links), or an existing
+/// file inside an input folder (a frame of an image sequence). `outputs` pairs each path
+/// with what it is (`"--rrd"`, `"--out"`, …); paths that do not exist yet cannot be inputs
+/// and pass.
+///
+/// Errors: [`Error::OutputIsInput`] naming both paths.
+pub fn check_outputs(outputs: &[(&'static str, &Path)], inputs: &[&Path]) -> Result<()> {
+    let inputs: Vec<(std::path::PathBuf, &Path)> = inputs
+        .iter()
+        .filter_map(|p| std::fs::canonicalize(p).ok().map(|c| (c, *p)))
+        .collect();
+    for &(what, out) in outputs {
+        let Ok(co) = std::fs::canonicalize(out) else {
+            continue;
+        };
+        for (ci, input) in &inputs {
+            if co == *ci || (ci.is_dir() && co.is_file() && co.starts_with(ci)) {
+                return Err(Error::OutputIsInput {
+                    what,
+                    output: out.to_path_buf(),
+                    input: input.to_path_buf(),
+                });
+            }
+        }
+    }
+    Ok(())
+}

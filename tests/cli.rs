@@ -668,3 +668,60 @@ fn objects_are_segmented_and_reconstructed_each() {
     );
     assert!(err.contains("neither `auto` nor a count"), "{err}");
 }
+
+/// An output that is one of the inputs is refused before anything is opened: the input
+/// survives byte for byte (`--rrd INPUT` used to delete it), and so does a frame in the
+/// input folder of `track`.
+#[test]
+fn outputs_never_overwrite_inputs() {
+    let d = tmp("inputs-survive");
+    let input = d.join("t.csv");
+    let text = "frame,track,x,y\n0,0,1,2\n0,1,3,4\n1,0,1.5,2\n1,1,3.5,4\n";
+    std::fs::write(&input, text).unwrap();
+    for args in [
+        vec![
+            "--out",
+            d.join("r").to_str().unwrap(),
+            "--rrd",
+            input.to_str().unwrap(),
+        ],
+        vec!["--out", input.to_str().unwrap()],
+    ] {
+        let err = run_err(bin().arg("reconstruct").arg(&input).args(&args));
+        assert!(err.contains("would overwrite the input"), "{err}");
+        assert_eq!(std::fs::read_to_string(&input).unwrap(), text);
+    }
+    let frames = d.join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    let frame = frames.join("000.png");
+    std::fs::write(&frame, b"not really a png").unwrap();
+    let err = run_err(
+        bin()
+            .arg("track")
+            .arg(&frames)
+            .arg("--out")
+            .arg(d.join("t2.csv"))
+            .arg("--rrd")
+            .arg(&frame),
+    );
+    assert!(err.contains("would overwrite the input"), "{err}");
+    assert_eq!(std::fs::read(&frame).unwrap(), b"not really a png");
+}
+
+/// `rank3 … | head` with the reader gone before rank3 prints: no panic, a normal exit.
+#[test]
+fn closed_stdout_is_not_a_panic() {
+    let d = tmp("closed-stdout");
+    let mut child = bin()
+        .args(["synth", "--frames", "5", "--points", "12", "--out"])
+        .arg(&d)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take()); // close the pipe's read end
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(out.status.success(), "{err}");
+}
