@@ -70,10 +70,10 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 
+use crate::atomic::{temp_path, write_file};
 use crate::{Error, Result};
 
 /// Add this to both coordinates of a keypoint or principal point in rank3's tracker
@@ -597,27 +597,6 @@ fn quaternion_of(r: &Matrix3<f64>) -> [f64; 4] {
     let q = UnitQuaternion::new_normalize(q.into_inner()).into_inner();
     let s = if q.w < 0.0 { -1.0 } else { 1.0 };
     [s * q.w, s * q.i, s * q.j, s * q.k]
-}
-
-/// A temporary file name in `dir`, unique in this process, hidden from COLMAP's reader.
-fn temp_path(dir: &Path, name: &str) -> PathBuf {
-    static COUNTER: AtomicUsize = AtomicUsize::new(0);
-    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-    dir.join(format!(".{name}.rank3-tmp-{}-{n}", std::process::id()))
-}
-
-/// Creates `path`, writes it with `body` and flushes it to disk.
-fn write_file(
-    path: &Path,
-    body: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
-) -> Result<()> {
-    let file = File::create(path).map_err(|e| Error::io(path, e))?;
-    let mut w = BufWriter::new(file);
-    body(&mut w).map_err(|e| Error::io(path, e))?;
-    let file = w
-        .into_inner()
-        .map_err(|e| Error::io(path, e.into_error()))?;
-    file.sync_all().map_err(|e| Error::io(path, e))
 }
 
 // Numbers are written with `{:?}`: the shortest text that parses back to the same f64

@@ -18,6 +18,7 @@
 #[cfg(feature = "builtin-lapack")]
 mod lapack_shim;
 
+pub mod atomic;
 pub mod camera;
 pub mod colmap;
 pub mod completion;

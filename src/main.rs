@@ -233,6 +233,15 @@ fn reconstruct_objects_cli(
         rank3::recording::log_objects(r, table, &mb)?;
     }
     let given = matches!(objects, rank3::segment::Objects::Count(_));
+    let dirs: Vec<String> = mb
+        .objects
+        .iter()
+        .filter(|o| o.reconstruction.is_ok())
+        .map(|o| rank3::objects::object_dir(o.index))
+        .collect();
+    let mut keep = vec!["objects.csv", "segmentation.json", "tracks.csv"];
+    keep.extend(dirs.iter().map(String::as_str));
+    rank3::output::remove_stale(out, &keep)?;
     rank3::output::write_objects(&mb, given, out)?;
     let s = &mb.segmentation;
     eprintln!(
@@ -454,6 +463,7 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     )?;
     #[cfg(not(feature = "rerun"))]
     let rec = Reconstruction::from_tracks(t, &config)?;
+    remove_stale_single(&rec, &a.out)?;
     rank3::output::write_all(&rec, &a.out)?;
     write_colmap(&rec, t, &a.out)?;
     print_summary(&rec, &a.out);
@@ -483,6 +493,21 @@ fn show_perspective_layout(
         )?;
     }
     Ok(())
+}
+
+/// Removes an earlier run's outputs that a single-object run does not write (the objects'
+/// files; `colmap/` without a perspective result).
+fn remove_stale_single(rec: &Reconstruction, out: &Path) -> Result<(), rank3::Error> {
+    let mut keep = vec![
+        "reconstruction.json",
+        "completed.txt",
+        "points.ply",
+        "tracks.csv",
+    ];
+    if rec.perspective.is_some() {
+        keep.push("colmap");
+    }
+    rank3::output::remove_stale(out, &keep)
 }
 
 /// With a perspective result, the COLMAP text model in `OUT/colmap/`.
@@ -752,7 +777,7 @@ fn synth(a: &SynthArgs) -> Result<(), rank3::Error> {
     let tracks = a.out.join("tracks.csv");
     scene.table.write(&tracks)?;
     let truth = a.out.join("truth.json");
-    std::fs::write(&truth, scene.truth_json()).map_err(|e| rank3::Error::io(&truth, e))?;
+    rank3::atomic::write(&truth, scene.truth_json())?;
     say(format_args!(
         "wrote {} ({} frames × {} tracks, {} observations) and {}",
         tracks.display(),
@@ -1174,6 +1199,7 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
             ..Default::default()
         },
     )?;
+    remove_stale_single(&rec, &a.out)?;
     rank3::output::write_all(&rec, &a.out)?;
     write_colmap(&rec, &table, &a.out)?;
     print_summary(&rec, &a.out);

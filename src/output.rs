@@ -19,7 +19,7 @@ pub struct Written {
 pub fn write_all(rec: &Reconstruction, dir: &Path) -> Result<Written> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let json = dir.join("reconstruction.json");
-    std::fs::write(&json, rec.to_json()).map_err(|e| Error::io(&json, e))?;
+    crate::atomic::write(&json, rec.to_json())?;
     let completed = dir.join("completed.txt");
     write_completed(rec, &completed)?;
     let ply = dir.join("points.ply");
@@ -50,7 +50,7 @@ pub fn write_completed(rec: &Reconstruction, path: &Path) -> Result<()> {
         ids(&rec.input_track_ids)
     );
     write_matrix(&mut s, m.nrows(), m.ncols(), |r, c| m[(r, c)]);
-    std::fs::write(path, s).map_err(|e| Error::io(path, e))
+    crate::atomic::write(path, s)
 }
 
 /// Binary little-endian PLY with `float x, y, z` per point (and `uchar inlier`).
@@ -72,7 +72,7 @@ pub fn write_ply(rec: &Reconstruction, path: &Path) -> Result<()> {
         }
         buf.push(u8::from(p.inlier));
     }
-    std::fs::write(path, buf).map_err(|e| Error::io(path, e))
+    crate::atomic::write(path, buf)
 }
 
 /// The perspective reconstruction of `rec` as a COLMAP sparse model ([`crate::colmap`]):
@@ -235,10 +235,10 @@ pub fn write_objects(
 ) -> Result<Vec<std::path::PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let csv = dir.join("objects.csv");
-    std::fs::write(&csv, mb.objects_csv()).map_err(|e| Error::io(&csv, e))?;
+    crate::atomic::write(&csv, mb.objects_csv())?;
     let json = dir.join("segmentation.json");
     let text = serde_json::to_string_pretty(&mb.report(given)).expect("serializable report");
-    std::fs::write(&json, text).map_err(|e| Error::io(&json, e))?;
+    crate::atomic::write(&json, text)?;
     let mut dirs = Vec::new();
     for o in &mb.objects {
         if let Ok(rec) = &o.reconstruction {
@@ -274,6 +274,56 @@ pub fn check_outputs(outputs: &[(&'static str, &Path)], inputs: &[&Path]) -> Res
                     input: input.to_path_buf(),
                 });
             }
+        }
+    }
+    Ok(())
+}
+
+/// Names rank3 writes in an output folder: files, and folders of files.
+const OUTPUT_FILE_NAMES: [&str; 5] = [
+    "reconstruction.json",
+    "completed.txt",
+    "points.ply",
+    "objects.csv",
+    "segmentation.json",
+];
+
+/// Removes from `dir` the outputs of an earlier run that this run will not write, so that
+/// every rank3 output in the folder belongs to this run: the files of
+/// `reconstruction.json`, `completed.txt`, `points.ply`, `objects.csv`,
+/// `segmentation.json` not in `keep`, and the folders `colmap/` and `object_<k>/` not in
+/// `keep` (their rank3 files, then the folder if that left it empty). Nothing else is
+/// touched (not `tracks.csv`, not files of the user's). A missing `dir` is fine.
+pub fn remove_stale(dir: &Path, keep: &[&str]) -> Result<()> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    let remove_file = |p: &Path| match std::fs::remove_file(p) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(Error::io(p, e)),
+        _ => Ok(()),
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if keep.contains(&name.as_str()) {
+            continue;
+        }
+        let path = entry.path();
+        let is_dir = entry.file_type().is_ok_and(|t| t.is_dir());
+        let object_dir = name
+            .strip_prefix("object_")
+            .is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()));
+        if !is_dir && OUTPUT_FILE_NAMES.contains(&name.as_str()) {
+            remove_file(&path)?;
+        } else if is_dir && (object_dir || name == "colmap") {
+            let inner: &[&str] = if name == "colmap" {
+                &["cameras.txt", "images.txt", "points3D.txt"]
+            } else {
+                &OUTPUT_FILE_NAMES[..3]
+            };
+            for f in inner {
+                remove_file(&path.join(f))?;
+            }
+            let _ = std::fs::remove_dir(&path); // only when empty
         }
     }
     Ok(())

@@ -657,6 +657,49 @@ fn objects_are_segmented_and_reconstructed_each() {
         );
         assert_eq!(report["objects"][k]["n_tracks"], sizes[k]);
     }
+    // The folder's outputs belong to the last run: a single-object run into it removes the
+    // objects' files and folders (and leaves the user's own files), and back.
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    run_ok(
+        bin()
+            .args(["reconstruct"])
+            .arg(&input)
+            .arg("--out")
+            .arg(&out)
+            .args(["--camera", "orthographic", "--no-robust"]),
+    );
+    for gone in ["objects.csv", "segmentation.json", "object_0", "object_1"] {
+        assert!(!out.join(gone).exists(), "{gone} left from the earlier run");
+    }
+    assert!(out.join("reconstruction.json").exists());
+    run_ok(
+        bin()
+            .args(["reconstruct"])
+            .arg(&input)
+            .arg("--out")
+            .arg(&out)
+            .args(["--objects", "auto", "--camera", "orthographic"]),
+    );
+    for gone in ["reconstruction.json", "completed.txt", "points.ply"] {
+        assert!(!out.join(gone).exists(), "{gone} left from the earlier run");
+    }
+    assert!(out.join("object_1/reconstruction.json").exists());
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    // No temporary file is left behind.
+    let temps = std::fs::read_dir(&out)
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .contains("rank3-tmp")
+        })
+        .count();
+    assert_eq!(temps, 0);
     // A count of 0 is refused by the argument parser.
     let err = run_err(
         bin()

@@ -174,7 +174,7 @@ impl TrackTable {
             Format::DenseTxt => dense::to_string(self),
             Format::Json => json::to_string(self),
         };
-        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+        crate::atomic::write(path, text)
     }
 
     /// A table from measurements (frame ids `0..F`, track ids `0..N`).
