@@ -1050,6 +1050,19 @@ fn track_recorded(
     if let Some(rec) = &recording {
         record_tracking(rec, &tracked, log_table)?;
     }
+    if tracked.table.n_tracks() == 0 || tracked.table.n_observed() == 0 {
+        return Err(rank3::Error::EmptyTable {
+            path: Some(input.to_path_buf()),
+            reason: format!(
+                "no point could be tracked in its {} frame(s): no corner passed the detector \
+                 (blank or textureless frames?) — try a lower --quality (now {}) or \
+                 --min-distance (now {} px), or give --init-points",
+                tracked.table.n_frames(),
+                opts.quality,
+                opts.min_distance
+            ),
+        });
+    }
     Ok((tracked, recording))
 }
 

@@ -768,3 +768,29 @@ fn closed_stdout_is_not_a_panic() {
     assert!(!err.contains("panicked"), "{err}");
     assert!(out.status.success(), "{err}");
 }
+
+/// `track` on frames with nothing to track (blank) is an error that says why, not an empty
+/// table and exit 0.
+#[test]
+fn track_with_no_trackable_point_is_an_error() {
+    let d = tmp("blank-frames");
+    let frames = d.join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    for k in 0..3 {
+        image::GrayImage::new(64, 48)
+            .save(frames.join(format!("{k:03}.png")))
+            .unwrap();
+    }
+    let err = run_err(
+        bin()
+            .arg("track")
+            .arg(&frames)
+            .arg("--out")
+            .arg(d.join("t.csv")),
+    );
+    assert!(
+        err.contains("no point could be tracked in its 3 frame(s)"),
+        "{err}"
+    );
+    assert!(!d.join("t.csv").exists());
+}
