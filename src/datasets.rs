@@ -122,7 +122,7 @@ pub fn read_hopkins(path: &std::path::Path) -> crate::Result<Hopkins> {
         }
     }
     Ok(Hopkins {
-        measurements: crate::Measurements::new(w, vec![true; f * p]),
+        measurements: crate::Measurements::complete(w),
         groups,
         n_groups: g,
         image_size: (h[3], h[4]),

@@ -15,7 +15,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use serde::Serialize;
 
-use crate::segment::{Label, SegmentConfig, Segmentation, segment};
+use crate::segment::{SegmentConfig, Segmentation, segment};
 use crate::{Config, Id, Reconstruction, Result, TrackTable};
 
 /// One object's result.
@@ -93,7 +93,7 @@ impl MultiBody {
             objects_mode: if given { "given" } else { "auto" },
             n_objects: self.objects.len(),
             n_outlier_tracks: s.n_outliers(),
-            n_unscored_tracks: s.labels.iter().filter(|l| **l == Label::Unscored).count(),
+            n_unscored_tracks: s.n_unscored(),
             sigma_px: s.sigma,
             energy: s.energy,
             label_cost: s.label_cost,

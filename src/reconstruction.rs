@@ -868,8 +868,7 @@ impl Reconstruction {
                 };
                 robust::robust_filter_observed(&meas_all, rc, &mut rng, &mut capture)
             })?;
-            let (mut groups_seen, mut other_object_tracks) = (1usize, 0usize);
-            other_groups.clear();
+            let mut other_object_tracks = 0;
             if let robust::Verdict::NoRigidMajority {
                 reason,
                 inlier_fraction,
@@ -907,16 +906,14 @@ impl Reconstruction {
                     let candidates: Vec<usize> = (0..kept.n_tracks())
                         .filter(|&p| !inlier[p] || n_flagged[p] > 0)
                         .collect();
-                    let groups = crate::segment::other_objects(
+                    other_groups = crate::segment::other_objects(
                         &meas_all,
                         model,
                         &candidates,
                         &crate::segment::SegmentConfig::default(),
                         &mut rng,
                     )?;
-                    groups_seen += groups.len();
-                    other_groups.clone_from(&groups);
-                    for &p in groups.iter().flatten() {
+                    for &p in other_groups.iter().flatten() {
                         if inlier[p] {
                             inlier[p] = false;
                             other_object_tracks += 1;
@@ -939,7 +936,7 @@ impl Reconstruction {
                 projective: None,
                 inliers_per_iteration: counts,
                 flagged_indices: Vec::new(),
-                rigid_groups_seen: groups_seen,
+                rigid_groups_seen: 1 + other_groups.len(),
                 other_object_tracks,
                 seconds,
             };

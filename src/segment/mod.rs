@@ -273,6 +273,14 @@ impl Segmentation {
         self.labels.iter().filter(|l| **l == Label::Outlier).count()
     }
 
+    /// Number of tracks seen in too few frames to be scored.
+    pub fn n_unscored(&self) -> usize {
+        self.labels
+            .iter()
+            .filter(|l| **l == Label::Unscored)
+            .count()
+    }
+
     /// Labels as codes (object index, −1 otherwise).
     pub fn codes(&self) -> Vec<i64> {
         self.labels.iter().map(Label::code).collect()
@@ -331,6 +339,17 @@ impl TrackInfo<'_> {
     }
 }
 
+impl TrackInfo<'_> {
+    /// `model` refitted to `set` by ALS over all frames, with every track's `ν_p r²_p` under
+    /// the refit and its `σ²` from `set` (`None`: the refit or `σ²` is not determined).
+    fn refit(&self, model: &AffineSubspace, set: &[usize], sweeps: usize) -> Option<Fitted> {
+        let m = self.ts.refit_with(model, set, sweeps)?;
+        let chi = self.chi(&m);
+        let s2 = self.sigma2_of(&m, &chi, set)?;
+        Some((m, chi, s2))
+    }
+}
+
 impl Pool {
     fn push(&mut self, model: AffineSubspace, chi: Vec<Option<f64>>, sigma2: f64) -> usize {
         self.defined_frames.push(model.n_defined());
@@ -352,7 +371,7 @@ struct Costs<'a> {
     scale: Vec<(f64, f64)>,
     /// Frames `k_p` of each track.
     k: &'a [f64],
-    outlier: Vec<f64>,
+    outlier: &'a [f64],
     scored: &'a [bool],
     /// `ln n` times the label-cost scale: `β_g = lambda · (8F_g − 9)`.
     lambda: f64,
@@ -364,7 +383,7 @@ impl<'a> Costs<'a> {
         pool: &'a Pool,
         shared_sigma2: Option<f64>,
         k: &'a [f64],
-        outlier: &[f64],
+        outlier: &'a [f64],
         scored: &'a [bool],
         lambda: f64,
         fixed: bool,
@@ -381,7 +400,7 @@ impl<'a> Costs<'a> {
             pool,
             scale,
             k,
-            outlier: outlier.to_vec(),
+            outlier,
             scored,
             lambda,
             fixed,
@@ -404,7 +423,7 @@ impl<'a> Costs<'a> {
     /// Per-track cost and assignment under set `s` (`usize::MAX` = outlier).
     fn assign(&self, s: &[usize]) -> (Vec<f64>, Vec<usize>) {
         let n = self.outlier.len();
-        let mut cost = self.outlier.clone();
+        let mut cost = self.outlier.to_vec();
         let mut who = vec![usize::MAX; n];
         for p in 0..n {
             if !self.scored[p] {
@@ -487,6 +506,16 @@ pub fn segment<R: Rng + ?Sized>(
     cfg.validate()?;
     let t0 = Instant::now();
     let ts = TrackSubspace::new(meas, &cfg.subspace);
+    segment_tracks(&ts, cfg, rng, t0)
+}
+
+/// [`segment`] on the tracks `ts` holds (`cfg` already validated; `t0` starts the clock).
+fn segment_tracks<R: Rng + ?Sized>(
+    ts: &TrackSubspace,
+    cfg: &SegmentConfig,
+    rng: &mut R,
+    t0: Instant,
+) -> Result<Segmentation> {
     let n = ts.n_tracks();
     let min_overlap = ts.min_overlap();
     let scored: Vec<bool> = (0..n)
@@ -509,9 +538,9 @@ pub fn segment<R: Rng + ?Sized>(
         })
         .collect();
     let n_obs: usize = (0..n).map(|p| 2 * ts.frames_of(p).len()).sum();
-    let area = cfg.image_area.unwrap_or_else(|| bounding_area(&ts));
+    let area = cfg.image_area.unwrap_or_else(|| bounding_area(ts));
     let info = TrackInfo {
-        ts: &ts,
+        ts,
         nu,
         k: (0..n).map(|p| ts.frames_of(p).len() as f64).collect(),
         sigma2_floor: (1e-6 * area.sqrt()).powi(2),
@@ -519,9 +548,9 @@ pub fn segment<R: Rng + ?Sized>(
     };
 
     // 1. Hypotheses from local neighbourhoods, each with its own σ².
-    let nbrs = neighbours(&ts, &eligible, cfg.neighbours);
+    let nbrs = neighbours(ts, &eligible, cfg.neighbours);
     let samples: Vec<Vec<usize>> = (0..cfg.hypotheses)
-        .filter_map(|_| local_sample(&ts, &eligible, &nbrs, rng))
+        .filter_map(|_| local_sample(ts, &eligible, &nbrs, rng))
         .collect();
     let sweeps = cfg.refit_sweeps;
     let grow = cfg.grow_steps;
@@ -529,13 +558,9 @@ pub fn segment<R: Rng + ?Sized>(
         .par_iter()
         .flat_map_iter(|set| {
             let mut out = Vec::new();
-            let local = (|| {
-                let m0 = ts.fit(&set[..4])?;
-                let m = ts.refit_with(&m0, set, sweeps)?;
-                let chi = info.chi(&m);
-                let s2 = info.sigma2_of(&m, &chi, set)?;
-                Some((m, chi, s2))
-            })();
+            let local = ts
+                .fit(&set[..4])
+                .and_then(|m0| info.refit(&m0, set, sweeps));
             let Some(mut cur) = local else { return out };
             out.push(cur.clone());
             // Growth: refit to every track within 3σ of the local fit (and the local set).
@@ -547,13 +572,7 @@ pub fn segment<R: Rng + ?Sized>(
                             || chi[p].is_some_and(|c| info.nu[p] > 0.0 && c / info.nu[p] < 9.0 * s2)
                     })
                     .collect();
-                let next = (|| {
-                    let m2 = ts.refit_with(m, &inl, sweeps)?;
-                    let chi2 = info.chi(&m2);
-                    let s22 = info.sigma2_of(&m2, &chi2, &inl)?;
-                    Some((m2, chi2, s22))
-                })();
-                match next {
+                match info.refit(m, &inl, sweeps) {
                     Some(nx) => cur = nx,
                     None => break,
                 }
@@ -622,12 +641,7 @@ pub fn segment<R: Rng + ?Sized>(
             let refits: Vec<Option<Fitted>> = picked
                 .par_iter()
                 .zip(&groups)
-                .map(|(&h, g)| {
-                    let m = ts.refit_with(&pool.models[h], g, sweeps)?;
-                    let chi = info.chi(&m);
-                    let s2 = info.sigma2_of(&m, &chi, g)?;
-                    Some((m, chi, s2))
-                })
+                .map(|(&h, g)| info.refit(&pool.models[h], g, sweeps))
                 .collect();
             let mut next = Vec::with_capacity(picked.len());
             for (i, r) in refits.into_iter().enumerate() {
@@ -665,10 +679,7 @@ pub fn segment<R: Rng + ?Sized>(
                         .map(|&(i, j)| {
                             let union: Vec<usize> =
                                 (0..n).filter(|&p| who[p] == i || who[p] == j).collect();
-                            let m = ts.refit_with(&pool.models[set[i]], &union, sweeps)?;
-                            let chi = info.chi(&m);
-                            let s2 = info.sigma2_of(&m, &chi, &union)?;
-                            Some((i, j, (m, chi, s2)))
+                            Some((i, j, info.refit(&pool.models[set[i]], &union, sweeps)?))
                         })
                         .collect();
                     let mut best: Option<(f64, Vec<usize>)> = None;
@@ -727,10 +738,9 @@ pub fn segment<R: Rng + ?Sized>(
             energy = e;
         }
     }
-    let fixed = given;
 
     // Final labels and groups, largest first.
-    let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
+    let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, given);
     let who = costs.smooth(&chosen, &nbrs, cfg.smoothness);
     let mut groups: Vec<(usize, Vec<usize>)> = chosen
         .iter()
@@ -782,7 +792,7 @@ pub fn segment<R: Rng + ?Sized>(
         objects,
         sigma: (ss_all / dof_all.max(1.0)).sqrt(),
         energy,
-        label_cost: if fixed {
+        label_cost: if given {
             0.0
         } else {
             lambda * (8.0 * ts.n_frames() as f64 - 9.0)
@@ -1124,22 +1134,22 @@ pub fn other_objects<R: Rng + ?Sized>(
             })
             .collect(),
     );
-    let seg = match segment(&sub, cfg, rng) {
+    // One estimator over the candidates serves the segmentation and both fits below (a
+    // track's fit to `main` depends only on the track and the frames).
+    let ts = TrackSubspace::new(&sub, &cfg.subspace);
+    let seg = match segment_tracks(&ts, cfg, rng, Instant::now()) {
         Ok(s) => s,
         Err(Error::TooFew { .. }) | Err(Error::Degenerate(_)) => return Ok(Vec::new()),
         Err(e) => return Err(e),
     };
-    let ts_all = TrackSubspace::new(meas, &cfg.subspace);
-    let ts_sub = TrackSubspace::new(&sub, &cfg.subspace);
-    let n_obs: usize = (0..n_all).map(|p| 2 * ts_all.frames_of(p).len()).sum();
-    let lambda = cfg.label_cost_scale * (n_obs.max(2) as f64).ln();
+    let lambda = cfg.label_cost_scale * ((2 * meas.n_observed()).max(2) as f64).ln();
     let s2 = (seg.sigma * seg.sigma).max(1e-12);
     let mut out = Vec::new();
     for g in &seg.objects {
         let mut gain = 0.0;
         for &c in &g.tracks {
-            let own = ts_sub.track_fit(&g.model, c);
-            let in_main = ts_all.track_fit(main, candidates[c]);
+            let own = ts.track_fit(&g.model, c);
+            let in_main = ts.track_fit(main, c);
             match (own, in_main) {
                 (Some(o), Some(m)) => {
                     let nu = (2.0 * o.kept as f64 - 3.0).max(0.0);
