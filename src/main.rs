@@ -145,34 +145,29 @@ fn say(line: std::fmt::Arguments<'_>) {
     let _ = writeln!(std::io::stdout().lock(), "{line}");
 }
 
-/// Files a run may write in its output folder (checked against the inputs).
-const OUTPUT_FILES: [&str; 6] = [
-    "reconstruction.json",
-    "completed.txt",
-    "points.ply",
-    "tracks.csv",
-    "objects.csv",
-    "segmentation.json",
-];
-
 /// Refuses, before anything is opened, an output (the .rrd, the output file or folder, the
 /// files written in the folder) that would overwrite an input.
 fn refuse_overwriting_inputs(
     inputs: &[&Path],
     out_dir: Option<&Path>,
     out_file: Option<&Path>,
-    rrd: Option<&Path>,
+    #[cfg(feature = "rerun")] record: &rank3::recording::RecordingArgs,
 ) -> Result<(), rank3::Error> {
     let mut outputs: Vec<(&'static str, PathBuf)> = Vec::new();
-    if let Some(r) = rrd {
-        outputs.push(("--rrd", r.to_path_buf()));
+    #[cfg(feature = "rerun")]
+    if let Some(r) = &record.rrd {
+        outputs.push(("--rrd", r.clone()));
     }
     if let Some(f) = out_file {
         outputs.push(("--out", f.to_path_buf()));
     }
     if let Some(d) = out_dir {
         outputs.push(("--out", d.to_path_buf()));
-        outputs.extend(OUTPUT_FILES.iter().map(|n| ("output file", d.join(n))));
+        let written = rank3::output::RECONSTRUCTION_FILES
+            .iter()
+            .chain(&rank3::output::OBJECTS_FILES)
+            .chain(&["tracks.csv"]);
+        outputs.extend(written.map(|n| ("output file", d.join(n))));
     }
     let refs: Vec<(&'static str, &Path)> = outputs.iter().map(|(w, p)| (*w, p.as_path())).collect();
     rank3::output::check_outputs(&refs, inputs)
@@ -239,7 +234,7 @@ fn reconstruct_objects_cli(
         .filter(|o| o.reconstruction.is_ok())
         .map(|o| rank3::objects::object_dir(o.index))
         .collect();
-    let mut keep = vec!["objects.csv", "segmentation.json", "tracks.csv"];
+    let mut keep = rank3::output::OBJECTS_FILES.to_vec();
     keep.extend(dirs.iter().map(String::as_str));
     rank3::output::remove_stale(out, &keep)?;
     rank3::output::write_objects(&mb, given, out)?;
@@ -249,10 +244,7 @@ fn reconstruct_objects_cli(
         mb.objects.len(),
         if given { "given" } else { "found" },
         s.n_outliers(),
-        s.labels
-            .iter()
-            .filter(|l| **l == rank3::segment::Label::Unscored)
-            .count(),
+        s.n_unscored(),
         s.sigma,
         s.rounds,
         s.seconds
@@ -274,11 +266,8 @@ fn reconstruct_objects_cli(
             ),
         }
     }
-    eprintln!(
-        "wrote {} and {}",
-        out.join("objects.csv").display(),
-        out.join("segmentation.json").display()
-    );
+    let [csv, json] = rank3::output::OBJECTS_FILES.map(|name| out.join(name));
+    eprintln!("wrote {} and {}", csv.display(), json.display());
     Ok(())
 }
 
@@ -411,9 +400,7 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         Some(&a.out),
         None,
         #[cfg(feature = "rerun")]
-        a.record.rrd.as_deref(),
-        #[cfg(not(feature = "rerun"))]
-        None,
+        &a.record,
     )?;
     #[cfg(feature = "rerun")]
     let recording = a.record.open(
@@ -498,12 +485,7 @@ fn show_perspective_layout(
 /// Removes an earlier run's outputs that a single-object run does not write (the objects'
 /// files; `colmap/` without a perspective result).
 fn remove_stale_single(rec: &Reconstruction, out: &Path) -> Result<(), rank3::Error> {
-    let mut keep = vec![
-        "reconstruction.json",
-        "completed.txt",
-        "points.ply",
-        "tracks.csv",
-    ];
+    let mut keep = rank3::output::RECONSTRUCTION_FILES.to_vec();
     if rec.perspective.is_some() {
         keep.push("colmap");
     }
@@ -1074,9 +1056,7 @@ fn track_cmd(a: &TrackArgs) -> Result<(), rank3::Error> {
         None,
         Some(&a.out),
         #[cfg(feature = "rerun")]
-        a.record.rrd.as_deref(),
-        #[cfg(not(feature = "rerun"))]
-        None,
+        &a.record,
     )?;
     // Fail on a bad output extension before the (long) tracking.
     rank3::tracks::Format::from_path(&a.out)?;
@@ -1130,9 +1110,7 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
         Some(&a.out),
         None,
         #[cfg(feature = "rerun")]
-        a.record.rrd.as_deref(),
-        #[cfg(not(feature = "rerun"))]
-        None,
+        &a.record,
     )?;
     std::fs::create_dir_all(&a.out).map_err(|e| rank3::Error::io(&a.out, e))?;
     // The table goes in with the reconstruction (reconstruct_recorded logs it).

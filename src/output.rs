@@ -15,14 +15,19 @@ pub struct Written {
     pub ply: PathBuf,
 }
 
+/// The files [`write_all`] writes: `reconstruction.json`, `completed.txt`, `points.ply`.
+pub const RECONSTRUCTION_FILES: [&str; 3] = ["reconstruction.json", "completed.txt", "points.ply"];
+
+/// The files [`write_objects`] writes besides its `object_<k>/` folders: `objects.csv`,
+/// `segmentation.json`.
+pub const OBJECTS_FILES: [&str; 2] = ["objects.csv", "segmentation.json"];
+
 /// Writes the three outputs into `dir` (created if needed).
 pub fn write_all(rec: &Reconstruction, dir: &Path) -> Result<Written> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let json = dir.join("reconstruction.json");
+    let [json, completed, ply] = RECONSTRUCTION_FILES.map(|name| dir.join(name));
     crate::atomic::write(&json, rec.to_json())?;
-    let completed = dir.join("completed.txt");
     write_completed(rec, &completed)?;
-    let ply = dir.join("points.ply");
     write_ply(rec, &ply)?;
     Ok(Written {
         json,
@@ -234,9 +239,8 @@ pub fn write_objects(
     dir: &Path,
 ) -> Result<Vec<std::path::PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let csv = dir.join("objects.csv");
+    let [csv, json] = OBJECTS_FILES.map(|name| dir.join(name));
     crate::atomic::write(&csv, mb.objects_csv())?;
-    let json = dir.join("segmentation.json");
     let text = serde_json::to_string_pretty(&mb.report(given)).expect("serializable report");
     crate::atomic::write(&json, text)?;
     let mut dirs = Vec::new();
@@ -279,15 +283,6 @@ pub fn check_outputs(outputs: &[(&'static str, &Path)], inputs: &[&Path]) -> Res
     Ok(())
 }
 
-/// Names rank3 writes in an output folder: files, and folders of files.
-const OUTPUT_FILE_NAMES: [&str; 5] = [
-    "reconstruction.json",
-    "completed.txt",
-    "points.ply",
-    "objects.csv",
-    "segmentation.json",
-];
-
 /// Removes from `dir` the outputs of an earlier run that this run will not write, so that
 /// every rank3 output in the folder belongs to this run: the files of
 /// `reconstruction.json`, `completed.txt`, `points.ply`, `objects.csv`,
@@ -312,13 +307,21 @@ pub fn remove_stale(dir: &Path, keep: &[&str]) -> Result<()> {
         let object_dir = name
             .strip_prefix("object_")
             .is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()));
-        if !is_dir && OUTPUT_FILE_NAMES.contains(&name.as_str()) {
+        let rank3_file = RECONSTRUCTION_FILES
+            .iter()
+            .chain(&OBJECTS_FILES)
+            .any(|f| *f == name);
+        if !is_dir && rank3_file {
             remove_file(&path)?;
         } else if is_dir && (object_dir || name == "colmap") {
             let inner: &[&str] = if name == "colmap" {
-                &["cameras.txt", "images.txt", "points3D.txt"]
+                &[
+                    crate::colmap::CAMERAS_TXT,
+                    crate::colmap::IMAGES_TXT,
+                    crate::colmap::POINTS3D_TXT,
+                ]
             } else {
-                &OUTPUT_FILE_NAMES[..3]
+                &RECONSTRUCTION_FILES
             };
             for f in inner {
                 remove_file(&path.join(f))?;

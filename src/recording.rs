@@ -1059,11 +1059,7 @@ pub fn log_input_with(
 ) -> RecordingResult {
     at_stage(rec, "input");
     let n = table.n_tracks();
-    if n <= options.max_annotated_tracks.min(65535) {
-        let ctx =
-            AnnotationContext::new(table.track_ids().iter().enumerate().map(|(p, id)| {
-                ClassDescription::from((class_id(p), format!("track {id}").as_str()))
-            }));
+    if let Some(ctx) = track_labels(table, options) {
         rec.log_static("image", &ctx)?;
         rec.log_static("world", &ctx)?;
         rec.log_static("affine", &ctx)?;
@@ -1072,6 +1068,18 @@ pub fn log_input_with(
     let all: Vec<usize> = (0..n).collect();
     rec.log(paths::TRAJECTORIES, &trajectory_batches(table, &all)?)?;
     send_frame_points(rec, paths::TRACKS, "input", table, &all, None, 2.0)
+}
+
+/// The annotation context that names each class id `track <id>` (hover labels), when the
+/// table has at most `options.max_annotated_tracks` tracks.
+fn track_labels(table: &TrackTable, options: &RecordingOptions) -> Option<AnnotationContext> {
+    (table.n_tracks() <= options.max_annotated_tracks.min(65535)).then(|| {
+        AnnotationContext::new(
+            table.track_ids().iter().enumerate().map(|(p, id)| {
+                ClassDescription::from((class_id(p), format!("track {id}").as_str()))
+            }),
+        )
+    })
 }
 
 /// Every-k-th index so that at most `max` remain.
@@ -2080,6 +2088,11 @@ const OBJECT_COLOURS: [[u8; 3]; 8] = [
     [140, 86, 75],
 ];
 
+/// Colour of object `k` (cycled).
+fn object_colour(k: usize) -> [u8; 3] {
+    OBJECT_COLOURS[k % OBJECT_COLOURS.len()]
+}
+
 /// Logs a multi-object result ([`crate::objects`]): each object's trajectories in its
 /// colour on `image/objects/<k>/trajectories` (stage `input`) and, per frame, its points on
 /// `image/objects/<k>`; the outlier tracks likewise in red under `image/objects/outliers`; each reconstructed object's points and cameras (in its own
@@ -2096,74 +2109,42 @@ pub fn log_objects(
     // The input's hover labels, then trajectories and per-frame points coloured by object
     // (not the input's per-track colours).
     at_stage(rec, "input");
-    if table.n_tracks() <= 65535 {
-        let ctx =
-            AnnotationContext::new(table.track_ids().iter().enumerate().map(|(p, id)| {
-                ClassDescription::from((class_id(p), format!("track {id}").as_str()))
-            }));
+    if let Some(ctx) = track_labels(table, &RecordingOptions::default()) {
         rec.log_static("image", &ctx)?;
-    }
-    let strips = |tracks: &[usize], colour: [u8; 3]| -> RecordingResult<LineStrips2D> {
-        let (flat, lengths) = trajectories(table, tracks);
-        let mut out = Vec::with_capacity(lengths.len());
-        let mut at = 0;
-        for &len in &lengths {
-            out.push(
-                (0..len)
-                    .map(|i| [flat[2 * (at + i)], flat[2 * (at + i) + 1]])
-                    .collect::<Vec<[f32; 2]>>(),
-            );
-            at += len;
-        }
-        Ok(LineStrips2D::new(out)
-            .with_colors([colour])
-            .with_class_ids(tracks.iter().map(|&p| class_id(p))))
-    };
-    for o in &mb.objects {
-        let colour = OBJECT_COLOURS[o.index % OBJECT_COLOURS.len()];
-        rec.log(
-            format!("image/objects/{}/trajectories", o.index),
-            &strips(&o.tracks, colour)?,
-        )?;
-    }
-    at_stage(rec, "result");
-    for o in &mb.objects {
-        let colour = OBJECT_COLOURS[o.index % OBJECT_COLOURS.len()];
-        send_frame_points(
-            rec,
-            &format!("image/objects/{}", o.index),
-            "result",
-            table,
-            &o.tracks,
-            Some(colour),
-            3.0,
-        )?;
     }
     let outliers: Vec<usize> = (0..table.n_tracks())
         .filter(|&p| mb.segmentation.labels[p].code() < 0)
         .collect();
-    if !outliers.is_empty() {
+    let groups = mb
+        .objects
+        .iter()
+        .map(|o| {
+            let path = format!("image/objects/{}", o.index);
+            (path, &o.tracks, object_colour(o.index))
+        })
+        .chain(
+            (!outliers.is_empty()).then(|| ("image/objects/outliers".to_string(), &outliers, RED)),
+        )
+        .collect::<Vec<_>>();
+    for (path, tracks, colour) in &groups {
         rec.log(
-            "image/objects/outliers/trajectories",
-            &strips(&outliers, RED)?,
-        )?;
-        send_frame_points(
-            rec,
-            "image/objects/outliers",
-            "result",
-            table,
-            &outliers,
-            Some(RED),
-            3.0,
+            format!("{path}/trajectories"),
+            &[
+                &trajectory_batches(table, tracks)? as &dyn rerun::AsComponents,
+                &LineStrips2D::update_fields().with_colors([*colour]),
+            ],
         )?;
     }
     at_stage(rec, "result");
+    for (path, tracks, colour) in &groups {
+        send_frame_points(rec, path, "result", table, tracks, Some(*colour), 3.0)?;
+    }
     let mut offset = 0.0;
     let mut md = String::from(
         "| object | tracks | subspace RMS (px) | camera | RMS (px) |\n|---|---|---|---|---|\n",
     );
     for o in &mb.objects {
-        let colour = OBJECT_COLOURS[o.index % OBJECT_COLOURS.len()];
+        let colour = object_colour(o.index);
         match &o.reconstruction {
             Ok(r) => {
                 let pts = &r.model.points;
@@ -2172,7 +2153,7 @@ pub fn log_objects(
                     .map(|x| x.norm())
                     .fold(0.0, f64::max)
                     .max(scene_distance(&r.model) * 0.1);
-                let shift = nalgebra::Vector3::new(offset + radius, 0.0, 0.0);
+                let shift = (offset + radius) as f32;
                 offset += 2.5 * radius;
                 let base = format!("objects/{}", o.index);
                 rec.log(
@@ -2183,7 +2164,7 @@ pub fn log_objects(
                 )?;
                 rec.log(
                     base.clone(),
-                    &rerun::Transform3D::from_translation([shift[0] as f32, 0.0, 0.0]),
+                    &rerun::Transform3D::from_translation([shift, 0.0, 0.0]),
                 )?;
                 log_cameras(rec, &format!("{base}/cameras"), &r.model, &r.kept_frames)?;
                 md.push_str(&format!(
@@ -2207,11 +2188,7 @@ pub fn log_objects(
     md.push_str(&format!(
         "\n{} outlier and {} unscored tracks; σ {:.3} px; {} rounds.\n",
         mb.segmentation.n_outliers(),
-        mb.segmentation
-            .labels
-            .iter()
-            .filter(|l| **l == crate::segment::Label::Unscored)
-            .count(),
+        mb.segmentation.n_unscored(),
         mb.segmentation.sigma,
         mb.segmentation.rounds
     ));

@@ -751,6 +751,13 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthScene> {
             (axis, turn, offset, drift)
         })
         .collect();
+    // An independently moving body's point `x` turned by `r`, in frame `fi`: seen by frame
+    // 0's camera (the affine scenes keep frame `fi`'s scale), without the main camera's
+    // image drift.
+    let independent = |fi: usize, r: &Rotation3<f64>, x: &Vector3<f64>| {
+        let cam = if perspective.is_some() { 0 } else { fi };
+        imaging.image(cam, r, x) + (truth.translations[0] - truth.translations[cam])
+    };
     // A second rigid object: spins the other way about a tilted axis.
     let second_axis = nalgebra::Unit::new_normalize(Vector3::new(0.3, 1.0, 0.4));
     for p in 0..n {
@@ -771,9 +778,7 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthScene> {
                     let (axis, turn, offset, drift) = &object_motion[objects[p] - 1];
                     let a = fi as f64 / (f - 1).max(1) as f64;
                     let r2 = Rotation3::from_axis_angle(axis, turn * a) * truth.rotations[0];
-                    let cam = if perspective.is_some() { 0 } else { fi };
-                    let shift = truth.translations[0] - truth.translations[cam];
-                    imaging.image(cam, &r2, &(x * 0.35)) + shift + offset + drift * a
+                    independent(fi, &r2, &(x * 0.35)) + offset + drift * a
                 }
                 None | Some(OutlierKind::Mixed) => clean,
                 Some(OutlierKind::RandomWalk) => {
@@ -787,9 +792,7 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthScene> {
                     let a = fi as f64 / (f - 1) as f64;
                     let r2 =
                         Rotation3::from_axis_angle(&second_axis, -1.2 * a) * truth.rotations[0];
-                    let cam = if perspective.is_some() { 0 } else { fi };
-                    let shift = truth.translations[0] - truth.translations[cam];
-                    imaging.image(cam, &r2, x) + shift + Vector2::new(60.0 * a, 0.0)
+                    independent(fi, &r2, x) + Vector2::new(60.0 * a, 0.0)
                 }
                 Some(OutlierKind::Sliding) => {
                     clean + dir * (slide_speed * fi as f64 * (cfg.image_size / 400.0))
