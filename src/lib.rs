@@ -26,6 +26,7 @@ pub mod datasets;
 pub mod error;
 pub mod eval;
 pub mod measurements;
+pub mod mesh;
 pub mod metric;
 pub mod objects;
 pub mod observer;

@@ -71,6 +71,11 @@ struct ReconstructArgs {
     /// model they start from).
     #[arg(long, value_enum, default_value = "auto")]
     camera: CameraArg,
+    /// The frames the tracks come from (folder of PNG/JPEG or video, matched to the table's
+    /// frames by id, else by position): with them a textured mesh (mesh.obj + mesh.mtl +
+    /// mesh_texture.png, mesh.glb) is built and points.ply gets colours.
+    #[arg(long, value_name = "DIR|VIDEO")]
+    images: Option<PathBuf>,
     #[command(flatten)]
     opts: ReconstructOpts,
     #[cfg(feature = "rerun")]
@@ -137,6 +142,13 @@ struct ReconstructOpts {
     /// OUT/object_<k>/ per object (docs/formats.md).
     #[arg(long, value_name = "auto|K", value_parser = parse_objects)]
     objects: Option<rank3::segment::Objects>,
+    /// Do not build the textured mesh (built by default when the frames are known: `run`,
+    /// `reconstruct --images`).
+    #[arg(long)]
+    no_mesh: bool,
+    /// Leave the outlier tracks' points out of points.ply.
+    #[arg(long)]
+    ply_inliers_only: bool,
 }
 
 /// A line on stdout; a closed stdout (`rank3 … | head`) is not an error worth a panic.
@@ -166,6 +178,7 @@ fn refuse_overwriting_inputs(
         let written = rank3::output::RECONSTRUCTION_FILES
             .iter()
             .chain(&rank3::output::OBJECTS_FILES)
+            .chain(&rank3::mesh::export::MESH_FILES)
             .chain(&["tracks.csv"]);
         outputs.extend(written.map(|n| ("output file", d.join(n))));
     }
@@ -395,8 +408,10 @@ fn main() -> ExitCode {
 }
 
 fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
+    let mut inputs: Vec<&Path> = vec![&a.tracks];
+    inputs.extend(a.images.as_deref());
     refuse_overwriting_inputs(
-        &[&a.tracks],
+        &inputs,
         Some(&a.out),
         None,
         #[cfg(feature = "rerun")]
@@ -450,11 +465,100 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     )?;
     #[cfg(not(feature = "rerun"))]
     let rec = Reconstruction::from_tracks(t, &config)?;
-    remove_stale_single(&rec, &a.out)?;
-    rank3::output::write_all(&rec, &a.out)?;
-    write_colmap(&rec, t, &a.out)?;
-    print_summary(&rec, &a.out);
-    Ok(())
+    write_outputs(
+        rec,
+        t,
+        a.images.as_deref().map(|p| (p, a.opts.image_size)),
+        &a.opts,
+        &a.out,
+        #[cfg(feature = "rerun")]
+        recording.as_ref(),
+    )
+}
+
+/// Builds the textured mesh when the frames are known (a failure is reported after the
+/// reconstruction's files are written, so nothing computed is lost), then writes every
+/// output of a single-object run and prints the summary.
+fn write_outputs(
+    mut rec: Reconstruction,
+    table: &rank3::TrackTable,
+    frames: Option<(&Path, Option<[u32; 2]>)>,
+    opts: &ReconstructOpts,
+    out: &Path,
+    #[cfg(feature = "rerun")] recording: Option<&rerun::RecordingStream>,
+) -> Result<(), rank3::Error> {
+    let mut mesh_error = None;
+    let mesh = match frames {
+        Some((path, size)) if !opts.no_mesh => {
+            match rank3::mesh::from_frames(&rec, table, path, size, &Default::default()) {
+                Ok(m) => Some(m),
+                Err(e) => {
+                    mesh_error = Some(e);
+                    None
+                }
+            }
+        }
+        _ => None,
+    };
+    if let Some(m) = &mesh {
+        rec.mesh = Some(m.report.clone());
+    }
+    let colors: Option<std::collections::HashMap<rank3::Id, [u8; 3]>> = mesh.as_ref().map(|m| {
+        table
+            .track_ids()
+            .iter()
+            .zip(&m.track_colors)
+            .filter_map(|(id, c)| Some((id.clone(), (*c)?)))
+            .collect()
+    });
+    let mut keep = rank3::output::RECONSTRUCTION_FILES.to_vec();
+    if rec.perspective.is_some() {
+        keep.push("colmap");
+    }
+    if mesh.is_some() {
+        keep.extend(rank3::mesh::export::MESH_FILES);
+    }
+    rank3::output::remove_stale(out, &keep)?;
+    rank3::output::write_all_with(
+        &rec,
+        out,
+        rank3::output::PlyOptions {
+            colors: colors.as_ref(),
+            inliers_only: opts.ply_inliers_only,
+        },
+    )?;
+    if let Some(m) = &mesh {
+        rank3::mesh::export::write_all(m, out)?;
+        #[cfg(feature = "rerun")]
+        if let Some(r) = recording {
+            rank3::recording::log_mesh(r, &rec, m)?;
+        }
+    }
+    write_colmap(&rec, table, out)?;
+    print_summary(&rec, out);
+    if let Some(m) = &mesh {
+        let s = &m.report.surface;
+        let tex = m.report.texture.as_ref().map_or(String::new(), |t| {
+            format!(
+                ", texture {}×{} px from {} frames",
+                t.atlas_px[0], t.atlas_px[1], t.views_used
+            )
+        });
+        say(format_args!(
+            "mesh: {} triangles on {} tracks{tex} ({:.2} s) → {}",
+            s.triangles,
+            s.vertices,
+            m.report.seconds_surface + m.report.seconds_texture,
+            out.join("mesh.glb").display()
+        ));
+    }
+    match mesh_error {
+        Some(e) => {
+            eprintln!("the reconstruction was written; the mesh was not:");
+            Err(e)
+        }
+        None => Ok(()),
+    }
 }
 
 /// With `--camera auto` the layout sent when the recording opened has no perspective views
@@ -480,16 +584,6 @@ fn show_perspective_layout(
         )?;
     }
     Ok(())
-}
-
-/// Removes an earlier run's outputs that a single-object run does not write (the objects'
-/// files; `colmap/` without a perspective result).
-fn remove_stale_single(rec: &Reconstruction, out: &Path) -> Result<(), rank3::Error> {
-    let mut keep = rank3::output::RECONSTRUCTION_FILES.to_vec();
-    if rec.perspective.is_some() {
-        keep.push("colmap");
-    }
-    rank3::output::remove_stale(out, &keep)
 }
 
 /// With a perspective result, the COLMAP text model in `OUT/colmap/`.
@@ -1190,9 +1284,13 @@ fn run_cmd(a: &RunArgs) -> Result<(), rank3::Error> {
             ..Default::default()
         },
     )?;
-    remove_stale_single(&rec, &a.out)?;
-    rank3::output::write_all(&rec, &a.out)?;
-    write_colmap(&rec, &table, &a.out)?;
-    print_summary(&rec, &a.out);
-    Ok(())
+    write_outputs(
+        rec,
+        &table,
+        Some((&a.input, a.recon.image_size.or(tracked_size))),
+        &a.recon,
+        &a.out,
+        #[cfg(feature = "rerun")]
+        recording.as_ref(),
+    )
 }

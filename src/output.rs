@@ -1,11 +1,12 @@
 //! Writing a reconstruction: `reconstruction.json`, `completed.txt`, `points.ply`.
 
+use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::reconstruction::Reconstruction;
 use crate::tracks::dense::write_matrix;
-use crate::{Error, Result};
+use crate::{Error, Id, Result};
 
 /// Paths of the files [`write_all`] wrote.
 #[derive(Debug, Clone)]
@@ -22,13 +23,32 @@ pub const RECONSTRUCTION_FILES: [&str; 3] = ["reconstruction.json", "completed.t
 /// `segmentation.json`.
 pub const OBJECTS_FILES: [&str; 2] = ["objects.csv", "segmentation.json"];
 
+/// How `points.ply` is written.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PlyOptions<'a> {
+    /// Per-track colours by track id (sampled from the frames, [`crate::mesh`]); with them the
+    /// PLY has `red`, `green`, `blue` (tracks without a colour are grey).
+    pub colors: Option<&'a HashMap<Id, [u8; 3]>>,
+    /// Leave the outlier tracks' points out.
+    pub inliers_only: bool,
+}
+
 /// Writes the three outputs into `dir` (created if needed).
 pub fn write_all(rec: &Reconstruction, dir: &Path) -> Result<Written> {
+    write_all_with(rec, dir, PlyOptions::default())
+}
+
+/// [`write_all`] with the PLY's colours and filter.
+pub fn write_all_with(
+    rec: &Reconstruction,
+    dir: &Path,
+    ply_opts: PlyOptions<'_>,
+) -> Result<Written> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let [json, completed, ply] = RECONSTRUCTION_FILES.map(|name| dir.join(name));
     crate::atomic::write(&json, rec.to_json())?;
     write_completed(rec, &completed)?;
-    write_ply(rec, &ply)?;
+    write_ply_with(rec, &ply, ply_opts)?;
     Ok(Written {
         json,
         completed,
@@ -62,18 +82,38 @@ pub fn write_completed(rec: &Reconstruction, path: &Path) -> Result<()> {
 /// With a perspective result, its Euclidean points; otherwise the metric (affine-family)
 /// ones.
 pub fn write_ply(rec: &Reconstruction, path: &Path) -> Result<()> {
-    let points = rec.perspective.as_ref().map_or(&rec.points, |p| &p.points);
-    let mut buf = Vec::with_capacity(64 + points.len() * 13);
+    write_ply_with(rec, path, PlyOptions::default())
+}
+
+/// [`write_ply`] with `uchar red, green, blue` after `z` when colours are given, and only
+/// the inlier points when asked.
+pub fn write_ply_with(rec: &Reconstruction, path: &Path, opts: PlyOptions<'_>) -> Result<()> {
+    let points: Vec<_> = rec
+        .perspective
+        .as_ref()
+        .map_or(&rec.points, |p| &p.points)
+        .iter()
+        .filter(|p| p.inlier || !opts.inliers_only)
+        .collect();
+    let mut buf = Vec::with_capacity(128 + points.len() * 16);
     let _ = write!(
         buf,
         "ply\nformat binary_little_endian 1.0\ncomment rank3 metric structure\nelement vertex \
-         {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar inlier\n\
+         {}\nproperty float x\nproperty float y\nproperty float z\n{}property uchar inlier\n\
          end_header\n",
-        points.len()
+        points.len(),
+        if opts.colors.is_some() {
+            "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+        } else {
+            ""
+        }
     );
     for p in points {
         for v in p.xyz {
             buf.extend_from_slice(&(v as f32).to_le_bytes());
+        }
+        if let Some(colors) = opts.colors {
+            buf.extend_from_slice(&colors.get(&p.track).copied().unwrap_or([128, 128, 128]));
         }
         buf.push(u8::from(p.inlier));
     }

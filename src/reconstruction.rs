@@ -742,6 +742,9 @@ pub struct Reconstruction {
     pub mirrored: bool,
     pub warnings: Vec<String>,
     pub timings: Vec<StageTime>,
+    /// Present when a textured surface was built ([`crate::mesh`]; `rank3 run`, or
+    /// `reconstruct --images`): its triangulation, texture and timing report.
+    pub mesh: Option<crate::mesh::MeshReport>,
     /// The metric model (kept frames × kept tracks), for library users.
     #[serde(skip)]
     pub model: MetricModel,
@@ -1291,6 +1294,7 @@ impl Reconstruction {
             mirrored,
             warnings,
             timings: timer.timings,
+            mesh: None,
             model,
             affine_structure: affine.s_hat.clone(),
             affine_prediction,

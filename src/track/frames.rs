@@ -9,7 +9,9 @@
 //!   `ffmpeg`): `ffprobe` gives the frame size, `ffmpeg -i FILE -f rawvideo -pix_fmt gray -`
 //!   streams raw 8-bit gray frames through a pipe. Frame ids are the 0-based frame indices.
 //!
-//! Intensities are `f32` in `[0, 1]` (8-bit value / 255).
+//! Intensities are `f32` in `[0, 1]` (8-bit value / 255). [`FrameSource::next_color_frame`]
+//! delivers the same frames in 8-bit RGB (for texturing and point colours); a source is
+//! read either in gray or in colour ([`FrameSource::open_color`]).
 
 // Negated comparisons are deliberate: they also reject NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -143,6 +145,15 @@ fn is_image_file(p: &Path) -> bool {
     )
 }
 
+/// A frame's id: its file stem, parsed with [`Id::parse`].
+fn frame_id(file: &Path) -> Id {
+    let stem = file
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    Id::parse(&stem)
+}
+
 /// A sequence of frames read lazily from a folder of images or a video.
 pub enum FrameSource {
     /// Images of a folder, in natural order.
@@ -165,6 +176,54 @@ impl FrameSource {
             FrameSource::images(path)
         } else {
             Ok(FrameSource::Video(VideoReader::open(path)?))
+        }
+    }
+
+    /// [`FrameSource::open`] for [`FrameSource::next_color_frame`] (a video is decoded to
+    /// RGB; a folder's images are converted when read).
+    pub fn open_color(path: impl AsRef<Path>) -> Result<FrameSource> {
+        let path = path.as_ref();
+        let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+        if meta.is_dir() {
+            FrameSource::images(path)
+        } else {
+            Ok(FrameSource::Video(VideoReader::open_as(path, true)?))
+        }
+    }
+
+    /// The next frame in 8-bit RGB and its id, `None` at the end (a video must have been
+    /// opened with [`FrameSource::open_color`]).
+    pub fn next_color_frame(&mut self) -> Result<Option<(Id, image::RgbImage)>> {
+        match self {
+            FrameSource::Images {
+                files, next, size, ..
+            } => {
+                let Some(file) = files.get(*next) else {
+                    return Ok(None);
+                };
+                *next += 1;
+                let img = image::open(file)
+                    .map_err(|e| Error::Image {
+                        path: file.clone(),
+                        message: format!("cannot decode image: {e}"),
+                    })?
+                    .into_rgb8();
+                let (w, h) = (img.width() as usize, img.height() as usize);
+                match *size {
+                    None => *size = Some((w, h)),
+                    Some((w0, h0)) if (w0, h0) != (w, h) => {
+                        return Err(Error::Image {
+                            path: file.clone(),
+                            message: format!(
+                                "frame size {w}×{h} differs from the first frame's {w0}×{h0}"
+                            ),
+                        });
+                    }
+                    Some(_) => {}
+                }
+                Ok(Some((frame_id(file), img)))
+            }
+            FrameSource::Video(v) => v.next_color_frame(),
         }
     }
 
@@ -245,11 +304,7 @@ impl FrameSource {
                     }
                     Some(_) => {}
                 }
-                let stem = file
-                    .file_stem()
-                    .map(|s| s.to_string_lossy().into_owned())
-                    .unwrap_or_default();
-                Ok(Some((Id::parse(&stem), img)))
+                Ok(Some((frame_id(file), img)))
             }
             FrameSource::Video(v) => v.next_frame(),
         }
@@ -286,6 +341,11 @@ fn not_installed(path: &Path, program: &str, e: &std::io::Error) -> Error {
 impl VideoReader {
     /// Probes the video's size with `ffprobe` and starts `ffmpeg`.
     pub fn open(path: &Path) -> Result<VideoReader> {
+        VideoReader::open_as(path, false)
+    }
+
+    /// [`VideoReader::open`], streaming 8-bit RGB (`rgb24`) when `color`.
+    pub fn open_as(path: &Path, color: bool) -> Result<VideoReader> {
         let probe = Command::new("ffprobe")
             .args([
                 "-v",
@@ -328,7 +388,13 @@ impl VideoReader {
         let mut child = Command::new("ffmpeg")
             .args(["-v", "error", "-nostdin", "-i"])
             .arg(path)
-            .args(["-f", "rawvideo", "-pix_fmt", "gray", "-"])
+            .args([
+                "-f",
+                "rawvideo",
+                "-pix_fmt",
+                if color { "rgb24" } else { "gray" },
+                "-",
+            ])
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -346,7 +412,7 @@ impl VideoReader {
             child,
             stdout,
             index: 0,
-            buf: vec![0; width * height],
+            buf: vec![0; width * height * if color { 3 } else { 1 }],
             done: false,
         })
     }
@@ -360,8 +426,34 @@ impl VideoReader {
     }
 
     fn next_frame(&mut self) -> Result<Option<(Id, GrayImage)>> {
-        if self.done {
+        if !self.read_raw()? {
             return Ok(None);
+        }
+        let img = GrayImage::from_u8(self.width, self.height, &self.buf)?;
+        let id = Id::from(self.index);
+        self.index += 1;
+        Ok(Some((id, img)))
+    }
+
+    fn next_color_frame(&mut self) -> Result<Option<(Id, image::RgbImage)>> {
+        if !self.read_raw()? {
+            return Ok(None);
+        }
+        let img =
+            image::RgbImage::from_raw(self.width as u32, self.height as u32, self.buf.clone())
+                .ok_or_else(|| Error::Video {
+                    path: self.path.clone(),
+                    message: "the video was not opened in colour".into(),
+                })?;
+        let id = Id::from(self.index);
+        self.index += 1;
+        Ok(Some((id, img)))
+    }
+
+    /// Fills `buf` with the next raw frame; false at the end of the stream.
+    fn read_raw(&mut self) -> Result<bool> {
+        if self.done {
+            return Ok(false);
         }
         let mut filled = 0;
         while filled < self.buf.len() {
@@ -396,12 +488,9 @@ impl VideoReader {
                     message: format!("stream ended inside frame {}", self.index),
                 });
             }
-            return Ok(None);
+            return Ok(false);
         }
-        let img = GrayImage::from_u8(self.width, self.height, &self.buf)?;
-        let id = Id::from(self.index);
-        self.index += 1;
-        Ok(Some((id, img)))
+        Ok(true)
     }
 }
 
