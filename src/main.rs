@@ -537,6 +537,20 @@ fn write_outputs(
     write_colmap(&rec, table, out)?;
     print_summary(&rec, out);
     if let Some(m) = &mesh {
+        if let Some(t) = &m.report.texture
+            && t.charts_unfilled > 0
+        {
+            eprintln!(
+                "warning: {} of {} texture charts come from frames that were not given (left \
+                 black): {} of the {} frames read matched the table's {} frames by {}",
+                t.charts_unfilled,
+                t.charts,
+                t.frames_matched,
+                t.frames_read,
+                table.n_frames(),
+                t.frames_matched_by
+            );
+        }
         let s = &m.report.surface;
         let tex = m.report.texture.as_ref().map_or(String::new(), |t| {
             format!(

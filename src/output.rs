@@ -326,7 +326,7 @@ pub fn check_outputs(outputs: &[(&'static str, &Path)], inputs: &[&Path]) -> Res
 /// Removes from `dir` the outputs of an earlier run that this run will not write, so that
 /// every rank3 output in the folder belongs to this run: the files of
 /// `reconstruction.json`, `completed.txt`, `points.ply`, `objects.csv`,
-/// `segmentation.json` not in `keep`, and the folders `colmap/` and `object_<k>/` not in
+/// `segmentation.json`, `mesh.obj`, `mesh.mtl`, `mesh_texture.png`, `mesh.glb` not in `keep`, and the folders `colmap/` and `object_<k>/` not in
 /// `keep` (their rank3 files, then the folder if that left it empty). Nothing else is
 /// touched (not `tracks.csv`, not files of the user's). A missing `dir` is fine.
 pub fn remove_stale(dir: &Path, keep: &[&str]) -> Result<()> {
@@ -350,6 +350,7 @@ pub fn remove_stale(dir: &Path, keep: &[&str]) -> Result<()> {
         let rank3_file = RECONSTRUCTION_FILES
             .iter()
             .chain(&OBJECTS_FILES)
+            .chain(&crate::mesh::export::MESH_FILES)
             .any(|f| *f == name);
         if !is_dir && rank3_file {
             remove_file(&path)?;

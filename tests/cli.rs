@@ -30,7 +30,8 @@ fn run_err(cmd: &mut Command) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
-/// Reads a binary little-endian PLY with float x, y, z (+ uchar inlier) vertices.
+/// Reads a binary little-endian PLY with float x, y, z (+ uchar red, green, blue when the
+/// frames were known, + uchar inlier) vertices.
 fn read_ply(path: &Path) -> Vec<[f32; 3]> {
     let bytes = std::fs::read(path).unwrap();
     let end = bytes
@@ -49,12 +50,21 @@ fn read_ply(path: &Path) -> Vec<[f32; 3]> {
     for p in ["property float x", "property float y", "property float z"] {
         assert!(header.contains(p));
     }
+    let stride: usize = header
+        .lines()
+        .filter_map(|l| l.strip_prefix("property "))
+        .map(|l| if l.starts_with("float ") { 4 } else { 1 })
+        .sum();
     let body = &bytes[end..];
-    assert_eq!(body.len(), n * 13);
+    assert_eq!(body.len(), n * stride);
     (0..n)
         .map(|i| {
             let f = |k: usize| {
-                f32::from_le_bytes(body[i * 13 + 4 * k..i * 13 + 4 * k + 4].try_into().unwrap())
+                f32::from_le_bytes(
+                    body[i * stride + 4 * k..i * stride + 4 * k + 4]
+                        .try_into()
+                        .unwrap(),
+                )
             };
             [f(0), f(1), f(2)]
         })

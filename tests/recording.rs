@@ -1382,3 +1382,42 @@ fn cli_objects_recording() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The textured mesh is logged beside the points it was built on (Mesh3D with positions,
+/// triangles, normals, texture coordinates and the atlas as albedo texture), with its report;
+/// the viewer's loader accepts it.
+#[test]
+fn mesh_is_recorded_with_its_texture() {
+    let (table, _) = table();
+    let result = rank3::Reconstruction::from_tracks(&table, &Config::default()).unwrap();
+    let scene = rank3::mesh::Scene::from_reconstruction(&result, &table, None).unwrap();
+    let ids = table.frame_ids().to_vec();
+    let mut k = 0;
+    let mut feed = || {
+        k += 1;
+        Ok(ids.get(k - 1).map(|id| {
+            let img = image::RgbImage::from_fn(64, 48, |x, y| image::Rgb([x as u8, y as u8, 90]));
+            (id.clone(), img)
+        }))
+    };
+    let mesh =
+        rank3::mesh::build(&scene, &rank3::mesh::MeshConfig::default(), Some(&mut feed)).unwrap();
+    assert!(mesh.triangles.len() > 10, "{:?}", mesh.report);
+    let (dir, path, rec) = temp_recording("mesh");
+    recording::log_mesh(&rec, &result, &mesh).unwrap();
+    drop(rec);
+    let c = read_rrd(&path);
+    let n = mesh.positions.len();
+    let get = |component: &str| c.get(paths::MESH, &format!("Mesh3D:{component}"));
+    assert_eq!(get("vertex_positions").total(), n);
+    assert_eq!(get("vertex_normals").total(), n);
+    assert_eq!(get("vertex_texcoords").total(), n);
+    assert_eq!(get("triangle_indices").total(), mesh.triangles.len());
+    assert_eq!(get("albedo_texture_buffer").rows(), 1);
+    assert!(get("vertex_positions").is_static);
+    assert_eq!(c.get(paths::MESH_REPORT, "TextDocument:text").rows(), 1);
+    if let Some(bin) = rerun_cli() {
+        viewer_verifies(&bin, &path);
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

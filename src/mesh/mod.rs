@@ -190,6 +190,7 @@ pub fn build(scene: &Scene, cfg: &MeshConfig, frames: Option<FrameFeed<'_>>) -> 
         .collect();
     let mut by_id = None;
     let (mut read, mut matched) = (0usize, 0usize);
+    let mut filled = vec![false; scene.n_frames()];
     while let Some((id, img)) = frames()? {
         let by_id = *by_id.get_or_insert(index.contains_key(&id));
         let f = if by_id {
@@ -200,6 +201,7 @@ pub fn build(scene: &Scene, cfg: &MeshConfig, frames: Option<FrameFeed<'_>>) -> 
         read += 1;
         let Some(f) = f else { continue };
         matched += 1;
+        filled[f] = true;
         texture::fill_frame(&plan, &charts_of, f, &img, &mut atlas);
         for &(p, xy) in &scene.observations[f] {
             let s = texture::sample(&img, xy[0], xy[1]);
@@ -307,3 +309,6 @@ pub fn from_frames(
     let mut feed = || source.next_color_frame();
     build(&scene, cfg, Some(&mut feed))
 }
+
+#[cfg(test)]
+mod tests;

@@ -7,7 +7,7 @@
 //! `cos θ · min(1, A / (½·A_max))`: θ the angle between the triangle's normal and the
 //! direction to the camera (frontal = 0), `A` its image area and `A_max` the largest over the
 //! candidate frames, so the most frontal view wins among those that show it at least half as
-//! large as the best (foreshortening and distance both shrink `A`). Views within 15 % of a
+//! large as the best (foreshortening and distance both shrink `A`). Views within 5 % of a
 //! triangle's best score are "near-best" for it. Few views are then used, so neighbouring
 //! triangles share an image patch and seams are fewer: repeatedly, the frame that is
 //! near-best for most of the triangles not yet assigned takes them all (greedy set cover);
@@ -73,10 +73,12 @@ pub struct TextureReport {
     pub frames_matched: usize,
     /// How input frames were matched to the table's frames: `"id"` or `"position"`.
     pub frames_matched_by: String,
+    /// Charts whose frame was not among those read (left black in the atlas).
+    pub charts_unfilled: usize,
 }
 
 /// A view scoring at least this share of a triangle's best score is "near-best" for it.
-const NEAR_BEST: f64 = 0.85;
+const NEAR_BEST: f64 = 0.95;
 
 /// The view of every triangle, the charts and their atlas layout.
 pub(crate) struct Plan {

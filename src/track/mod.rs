@@ -32,6 +32,7 @@ pub mod detect;
 pub mod frames;
 pub mod klt;
 pub mod pyramid;
+pub mod scene3d;
 pub mod synthetic;
 
 use std::collections::BTreeMap;
