@@ -1445,6 +1445,8 @@ fn kept_points(r: &Reconstruction) -> impl Iterator<Item = &crate::reconstructio
 }
 
 fn log_metric(rec: &RecordingStream, r: &Reconstruction) -> RecordingResult {
+    // The world has the first camera's axes: x right, y down, z forward (as the images).
+    rec.log_static("world", &rerun::ViewCoordinates::RDF())?;
     at_stage(rec, "metric-upgrade");
     let u = &r.metric_upgrade;
     rec.log(
@@ -1633,6 +1635,7 @@ fn log_perspective(
         |kf, kp| m.project(kf, kp),
     )?;
     at_stage(rec, "perspective");
+    rec.log_static("perspective/world", &rerun::ViewCoordinates::RDF())?;
     let fitted: Vec<&crate::reconstruction::PointResult> =
         p.points.iter().filter(|q| q.inlier).collect();
     let max_rms = fitted
