@@ -180,7 +180,7 @@ fn synthetic(
     );
     let tex = m.report.texture.clone().unwrap_or_default();
     println!(
-        "| {} | {} | {:?} | {} / {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {} / {} ({:.2} %) | {} | {:.1} | {:.0} % | {:.2} / {:.2} / {:.3} |",
+        "| {} | ±{half_angle}° | {} | {:?} | {} / {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {} / {} ({:.2} %) | {} | {:.1} | {:.0} % | {:.2} / {:.2} / {:.3} |",
         if panel { "corner + panel" } else { "corner" },
         n_frames,
         r.rec.camera_model,
@@ -212,9 +212,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .unwrap_or(24);
     println!("## Synthetic textured scenes ({n_frames} frames, 480×360, arc of ±25° / ±40°)\n");
     println!(
-        "| scene | frames | camera chosen | false tracks | triangles | mean dist (% of wall width) | p90 | vertex median | points rel. RMS (%) | bridging | on a false track | median view angle (°) | area within 5° of most frontal | track / reconstruct / mesh s |"
+        "| scene | arc | frames | camera chosen | false tracks | triangles | mean dist (% of wall width) | p90 | vertex median | points rel. RMS (%) | bridging | on a false track | median view angle (°) | area within 5° of most frontal | track / reconstruct / mesh s |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for half_angle in [25.0, 40.0] {
         for panel in [false, true] {
             eprintln!("scene panel={panel} half angle {half_angle}°");
