@@ -242,7 +242,7 @@ pub fn build(scene: &Scene, cfg: &MeshConfig, frames: Option<FrameFeed<'_>>) -> 
         let tri = t.tracks.map(|p| {
             *index.entry((p, c)).or_insert_with(|| {
                 let x = scene.points[p as usize].expect("vertices have points");
-                let xy = texture::observed_in(&tracks, p, view).expect("the view observes it");
+                let xy = texture::image_position(scene, &tracks, p, view);
                 mesh.positions.push([x[0] as f32, x[1] as f32, x[2] as f32]);
                 mesh.texcoords.push(texture::uv(&plan, c, xy));
                 mesh.colors

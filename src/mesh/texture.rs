@@ -19,8 +19,9 @@
 //! bounding box (padded by `padding_px`) is copied into the atlas, packed in shelves (tallest
 //! first) into a width of about `1.15·√(total area)`. When the atlas would exceed
 //! `max_atlas_px` on a side, every chart is scaled down by the same factor. Texture
-//! coordinates map each triangle corner's observed position in its chart's frame; `(0, 0)` is
-//! the atlas's top-left corner (glTF and Rerun; OBJ's `vt` flips `v`).
+//! coordinates map each triangle corner through its chart's camera (the model's projection of
+//! the corner's 3D point, whatever the camera model; the observed position if the model gives
+//! none); `(0, 0)` is the atlas's top-left corner (glTF and Rerun; OBJ's `vt` flips `v`).
 //!
 //! **Colours.** A track's colour is the mean of the frames' bilinear samples at its observed
 //! positions.
@@ -251,7 +252,7 @@ pub(crate) fn plan(scene: &Scene, tris: &[Triangle], cfg: &MeshConfig) -> Plan {
         tri_chart[i] = c;
         let b = &mut charts[c as usize].bbox;
         for p in tris[i].tracks {
-            let xy = observed(&tracks, p, view[i]).expect("chosen views observe the vertices");
+            let xy = image_position(scene, &tracks, p, view[i]);
             b[0] = b[0].min(xy[0] - pad);
             b[1] = b[1].min(xy[1] - pad);
             b[2] = b[2].max(xy[0] + pad);
@@ -404,11 +405,18 @@ pub(crate) fn uv(plan: &Plan, c: u32, xy: [f64; 2]) -> [f32; 2] {
     ]
 }
 
-/// The observed position of track `p` in frame `f`.
-pub(crate) fn observed_in(
-    scene_tracks: &[Vec<(u32, [f64; 2])>],
+/// Where a texture coordinate of track `p` points in frame `f`: the camera model's
+/// projection of its point (through the real projection: perspective, projective or affine),
+/// or its observed position when the model gives none.
+pub(crate) fn image_position(
+    scene: &Scene,
+    tracks: &[Vec<(u32, [f64; 2])>],
     p: u32,
     f: u32,
-) -> Option<[f64; 2]> {
-    observed(scene_tracks, p, f)
+) -> [f64; 2] {
+    scene
+        .project(f as usize, p as usize)
+        .filter(|xy| xy.iter().all(|v| v.is_finite()))
+        .or_else(|| observed(tracks, p, f))
+        .expect("chosen views observe the vertices")
 }
