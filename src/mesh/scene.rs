@@ -54,7 +54,8 @@ pub struct Scene {
     pub inlier: Vec<bool>,
     /// Homogeneous points of the projective model (projective views only).
     pub homogeneous: Vec<Option<Vector4<f64>>>,
-    /// Observations per frame: `(track, [x, y])`, track ascending.
+    /// Observations per frame: `(track, [x, y])`, track ascending (without the entries the
+    /// robust pass flagged as gross errors).
     pub observations: Vec<Vec<(u32, [f64; 2])>>,
     /// Width and height of the frames, pixels, when known.
     pub image_size: Option<[u32; 2]>,
@@ -152,10 +153,17 @@ impl Scene {
                 }
             }
         }
+        // Entries the robust pass flagged as gross errors are not observations of their track.
+        let flagged: std::collections::HashSet<(usize, usize)> =
+            rec.robust.as_ref().map_or_else(Default::default, |r| {
+                r.flagged_indices.iter().copied().collect()
+            });
         let mut observations = vec![Vec::new(); nf];
         for (f, obs) in observations.iter_mut().enumerate() {
             for p in 0..nt {
-                if let Some(xy) = table.get(f, p) {
+                if let Some(xy) = table.get(f, p)
+                    && !flagged.contains(&(f, p))
+                {
                     obs.push((p as u32, xy));
                 }
             }
