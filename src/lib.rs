@@ -40,6 +40,7 @@ pub mod refine;
 pub mod robust;
 pub mod sdp;
 pub mod segment;
+pub mod settings;
 pub mod solver;
 pub mod svd;
 pub mod synth;

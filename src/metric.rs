@@ -32,7 +32,7 @@ use crate::sdp::{SdpSettings, bilinear_row, params_from_sym, psd_least_squares, 
 use crate::{CameraModel, Error, Result};
 
 /// Settings of the metric upgrade.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct MetricConfig {
     /// `L` counts as positive definite when `λ_min > pd_tolerance · λ_max`. Default 1e-6.
     pub pd_tolerance: f64,

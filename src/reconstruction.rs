@@ -40,7 +40,7 @@ use crate::{
 };
 
 /// Pipeline settings. Every field has a documented default.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Config {
     /// Metric camera model. Default orthographic.
     pub camera: CameraModel,

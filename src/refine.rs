@@ -49,7 +49,7 @@ const DIAG_FLOOR_ABS: f64 = 1e-12;
 const DENSE_CHUNK_ENTRIES: usize = 1 << 22;
 
 /// Configuration of [`refine`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RefineConfig {
     /// Maximum number of LM iterations (each iteration is one damped linear solve and one
     /// cost evaluation, whether the step is accepted or not). Default 100.

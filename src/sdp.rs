@@ -27,7 +27,7 @@ use crate::error::{Error, Result};
 
 /// Settings of [`psd_least_squares`]. All tolerances refer to the internally rescaled
 /// problem (see [`psd_least_squares`]), where the objective and the unknown are O(1).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SdpSettings {
     /// Absolute duality-gap tolerance. Default `1e-10`.
     pub tol_gap_abs: f64,

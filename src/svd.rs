@@ -90,7 +90,8 @@ use crate::error::{Error, Result};
 use crate::observer::{Event, NoopObserver, Observer};
 
 /// How the sketch subspace is built.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum SketchScheme {
     /// Block Krylov space `[AΩ, (AAᵀ)AΩ, …]` (Musco & Musco 2015). Default.
     BlockKrylov,
@@ -100,7 +101,7 @@ pub enum SketchScheme {
 }
 
 /// Settings of [`truncated_svd`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TruncatedSvdConfig {
     /// Extra sketch columns `p` beyond `k`. Default 10.
     pub oversampling: usize,
@@ -148,7 +149,8 @@ impl Default for TruncatedSvdConfig {
 }
 
 /// Which method produced a [`TruncatedSvd`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum SvdMethod {
     /// faer's dense thin SVD (small input, zero matrix, or fallback).
     Thin,

@@ -64,7 +64,7 @@ pub struct Intrinsics {
 }
 
 /// Settings of the perspective stages. Every field has a documented default.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PerspectiveConfig {
     /// Known intrinsics. Default: none known.
     pub intrinsics: Intrinsics,

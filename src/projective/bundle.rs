@@ -225,7 +225,7 @@ impl Graph {
 }
 
 /// Settings of [`minimize`]. Every field has a documented default.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LmConfig {
     /// Cap on linear solves (accepted or rejected steps). Default 300.
     pub max_iterations: usize,

@@ -100,7 +100,7 @@ pub enum Start {
 }
 
 /// Settings of the projective stages. Every field has a documented default.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ProjectiveConfig {
     /// Default [`Bridge::Pose`] with `eta = 0.1` (chosen by measurement, docs/results.md).
     pub bridge: Bridge,

@@ -33,7 +33,7 @@ use crate::completion::{self, CompletionConfig};
 use crate::{Error, Measurements, NoopObserver, Result};
 
 /// Settings of [`affine_start`]. Every field has a documented default.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WindowConfig {
     /// Frames per window. Default 40.
     pub window: usize,

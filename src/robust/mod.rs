@@ -83,7 +83,7 @@ pub use subspace::{AffineSubspace, SubspaceConfig, TrackFit, TrackSubspace};
 use crate::{Error, Measurements, NoopObserver, Observer, Result};
 
 /// Settings of [`robust_filter`]. Every field has a documented default.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct RobustConfig {
     /// RANSAC settings (threshold `None` = estimate the noise; confidence 0.999; 50–2000
     /// hypotheses; LO on).

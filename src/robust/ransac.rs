@@ -135,7 +135,7 @@ pub trait Estimator {
 }
 
 /// RANSAC settings. Every field has a documented default.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct RansacConfig {
     /// Inlier threshold `τ` on the residual (pixels for the track estimator). `None`
     /// (default): estimate the noise scale robustly and use `τ = κσ` (see the module

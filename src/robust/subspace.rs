@@ -69,7 +69,7 @@ use crate::Measurements;
 use crate::svd::{TruncatedSvdConfig, truncated_svd};
 
 /// Settings of the track estimator. Every field has a documented default.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct SubspaceConfig {
     /// Frames a track must share with a hypothesis to be scored, and frames the 4 tracks
     /// of a sample must share. Clamped to the number of frames. Default 5.

@@ -29,7 +29,7 @@ const ROWS: usize = 32;
 use crate::{Error, Result};
 
 /// Corner detector settings.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DetectConfig {
     /// Maximum number of corners returned (strongest first). Default 500.
     pub max_features: usize,

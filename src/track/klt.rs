@@ -49,7 +49,7 @@ use super::pyramid::{Level, Pyramid};
 use crate::{Error, Result};
 
 /// Lucas–Kanade tracker settings.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct KltConfig {
     /// Window side `2r+1`, odd, ≥ 3. Default 21 (as OpenCV's `calcOpticalFlowPyrLK`).
     pub window: usize,

@@ -47,7 +47,7 @@ use crate::tracks::{Id, TrackTable};
 use crate::{Error, Result};
 
 /// Tracker settings; every field has a documented default.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TrackerConfig {
     /// Corner detection (also caps the number of live tracks: `detect.max_features`).
     pub detect: DetectConfig,
