@@ -417,6 +417,9 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         #[cfg(feature = "rerun")]
         &a.record,
     )?;
+    // The table is read before the recording opens (opening it replaces an existing .rrd,
+    // which bad input must not destroy).
+    let loaded = read_tracks(&a.tracks)?;
     #[cfg(feature = "rerun")]
     let recording = a.record.open(
         "rank3",
@@ -427,7 +430,6 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
             ..Default::default()
         },
     )?;
-    let loaded = read_tracks(&a.tracks)?;
     for w in &loaded.warnings {
         eprintln!("warning: {w}");
     }
@@ -1105,6 +1107,13 @@ fn track_recorded(
     #[cfg_attr(not(feature = "rerun"), allow(unused_variables))] log_table: bool,
     #[cfg_attr(not(feature = "rerun"), allow(unused_variables))] perspective: bool,
 ) -> Result<(Tracked, Recording), rank3::Error> {
+    // The input must open (folder with images, decodable video) before the recording is
+    // opened: opening it replaces an existing .rrd, which a run that fails at once on bad
+    // input must not destroy.
+    drop(rank3::track::FrameSource::open(input)?);
+    if let Some(p) = &opts.init_points {
+        rank3::track::read_init_points(p)?;
+    }
     // `rank3 track` logs the table itself; `rank3 run` reconstructs from it.
     #[cfg(feature = "rerun")]
     let recording = record.open(

@@ -804,3 +804,47 @@ fn track_with_no_trackable_point_is_an_error() {
     );
     assert!(!d.join("t.csv").exists());
 }
+
+/// A run that fails on bad input does not destroy an existing recording: the input is read
+/// (or the frames opened) before `--rrd` replaces the file.
+#[cfg(feature = "rerun")]
+#[test]
+fn bad_input_leaves_an_existing_recording_alone() {
+    let d = tmp("keep-rrd");
+    let rrd = d.join("old.rrd");
+    std::fs::write(&rrd, b"an earlier recording").unwrap();
+    let bad = d.join("bad.csv");
+    std::fs::write(&bad, "frame,track,x,y\n0,0,1,oops\n").unwrap();
+    let err = run_err(
+        bin()
+            .arg("reconstruct")
+            .arg(&bad)
+            .arg("--out")
+            .arg(d.join("out"))
+            .arg("--rrd")
+            .arg(&rrd),
+    );
+    assert!(err.contains("bad.csv:2"), "{err}");
+    assert_eq!(std::fs::read(&rrd).unwrap(), b"an earlier recording");
+    for cmd in ["run", "track"] {
+        let out = if cmd == "run" {
+            d.join("o")
+        } else {
+            d.join("t.csv")
+        };
+        run_err(
+            bin()
+                .arg(cmd)
+                .arg(d.join("no-such-folder"))
+                .arg("--out")
+                .arg(out)
+                .arg("--rrd")
+                .arg(&rrd),
+        );
+        assert_eq!(
+            std::fs::read(&rrd).unwrap(),
+            b"an earlier recording",
+            "{cmd}"
+        );
+    }
+}

@@ -36,9 +36,41 @@ struct Observation {
 
 type Row = (usize, usize, Id, Id, f64, f64);
 
-fn line_of(text: &str, raw: &RawValue) -> usize {
-    let offset = raw.get().as_ptr() as usize - text.as_ptr() as usize;
-    text[..offset.min(text.len())].matches('\n').count() + 1
+/// Line numbers of positions in `text` visited in increasing order: each call counts the
+/// newlines since the previous position only, so a whole file costs one pass (O(length)),
+/// not one rescan from the start per observation.
+struct Lines<'a> {
+    text: &'a str,
+    offset: usize,
+    line: usize,
+}
+
+impl<'a> Lines<'a> {
+    fn new(text: &'a str) -> Self {
+        Lines {
+            text,
+            offset: 0,
+            line: 1,
+        }
+    }
+
+    /// The 1-based line where `raw` (a slice of `text`) starts.
+    fn of(&mut self, raw: &RawValue) -> usize {
+        let offset = (raw.get().as_ptr() as usize)
+            .saturating_sub(self.text.as_ptr() as usize)
+            .min(self.text.len());
+        if offset < self.offset {
+            // Not in order (never for serde's array order): count from the start.
+            self.offset = 0;
+            self.line = 1;
+        }
+        self.line += self.text.as_bytes()[self.offset..offset]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count();
+        self.offset = offset;
+        self.line
+    }
 }
 
 /// Parses JSON text; `path` is used in error messages.
@@ -46,8 +78,9 @@ pub fn parse(text: &str, path: &Path) -> Result<TrackTable> {
     let file: FileIn = serde_json::from_str(text)
         .map_err(|e| Error::parse(path, e.line(), "json", e.to_string()))?;
     let mut obs = Vec::with_capacity(file.observations.len());
+    let mut lines = Lines::new(text);
     for (k, raw) in file.observations.iter().enumerate() {
-        let line = line_of(text, raw);
+        let line = lines.of(raw);
         let o: Observation = serde_json::from_str(raw.get())
             .map_err(|e| Error::parse(path, line, format!("observations[{k}]"), e.to_string()))?;
         let (x, y) = match (o.x, o.y) {
