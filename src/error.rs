@@ -122,6 +122,19 @@ pub enum Error {
         output: PathBuf,
         input: PathBuf,
     },
+    /// An input too large for a dense structure rank3 would have to allocate
+    /// ([`crate::budget`]): refused before the allocation, with what to do instead.
+    #[error(
+        "{what} would need {:.2} GiB, over the budget of {:.2} GiB: {advice}",
+        *needed_bytes as f64 / (1u64 << 30) as f64,
+        *budget_bytes as f64 / (1u64 << 30) as f64
+    )]
+    TooLarge {
+        what: String,
+        needed_bytes: usize,
+        budget_bytes: usize,
+        advice: String,
+    },
     /// A numerical routine failed in a way that is not the user's fault.
     #[error("numerical failure in {stage}: {message}")]
     Numerical {

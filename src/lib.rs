@@ -19,6 +19,7 @@
 mod lapack_shim;
 
 pub mod atomic;
+pub mod budget;
 pub mod camera;
 pub mod colmap;
 pub mod completion;

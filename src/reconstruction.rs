@@ -1465,6 +1465,17 @@ fn fit_selection(
             c.status, c.iterations
         ));
     }
+    if let Some(c) = &completion_report
+        && c.solver != config.completion.solver
+    {
+        warnings.push(format!(
+            "missing-data completion: {:?} ran instead of {:?}: the latter's dense matrix for \
+             {} frames is over the memory budget (crate::budget)",
+            c.solver,
+            config.completion.solver,
+            meas.n_frames()
+        ));
+    }
     let sv = &affine.singular_values;
     let (rank_ratio, rank_source) = if sv.len() >= 4 && sv[2] > 0.0 {
         (sv[3] / sv[2], "all tracks".to_string())
@@ -1512,7 +1523,25 @@ fn fit_selection(
         ));
     }
     let mut model = initial_model(&meas, &affine, &upgrade, affine_camera)?;
-    let refinement = match &config.refine {
+    // The refinement's reduced camera matrix is dense, (6F)² at most: skipped (with a
+    // warning) when that exceeds the memory budget rather than aborting on the allocation.
+    let refine_dim = 6 * meas.n_frames();
+    const GIB: f64 = (1u64 << 30) as f64;
+    let refine_cfg = config.refine.as_ref().filter(|_| {
+        let fits = crate::budget::matrix_bytes(refine_dim, refine_dim)
+            <= crate::budget::DENSE_MATRIX_BYTES;
+        if !fits {
+            warnings.push(format!(
+                "the metric refinement was skipped: its dense {refine_dim}×{refine_dim} camera \
+                 matrix ({:.2} GiB) is over the {:.2} GiB budget for {} frames",
+                crate::budget::matrix_bytes(refine_dim, refine_dim) as f64 / GIB,
+                crate::budget::DENSE_MATRIX_BYTES as f64 / GIB,
+                meas.n_frames()
+            ));
+        }
+        fits
+    });
+    let refinement = match refine_cfg {
         Some(rc) => {
             let r: RefineResult = timer.run("refine", |obs| {
                 refine::refine(&meas, &mut model, affine_camera, rc, obs)

@@ -418,6 +418,20 @@ fn check(cfg: &SynthConfig) -> Result<()> {
     if cfg.points < 4 {
         return bad("points", format!("{} < 4", cfg.points));
     }
+    // The scene's table is dense (F×N): sized against the table budget before anything is
+    // allocated or written.
+    let entries = cfg.frames.saturating_mul(cfg.points);
+    if entries.saturating_mul(crate::budget::TABLE_ENTRY_BYTES) > crate::budget::DENSE_TABLE_BYTES {
+        return Err(Error::TooLarge {
+            what: format!(
+                "a synthetic scene of {} frames × {} points",
+                cfg.frames, cfg.points
+            ),
+            needed_bytes: entries.saturating_mul(crate::budget::TABLE_ENTRY_BYTES),
+            budget_bytes: crate::budget::DENSE_TABLE_BYTES,
+            advice: "choose fewer frames or points".into(),
+        });
+    }
     if !(cfg.noise >= 0.0 && cfg.noise.is_finite()) {
         return bad(
             "noise",

@@ -848,3 +848,145 @@ fn bad_input_leaves_an_existing_recording_alone() {
         );
     }
 }
+
+/// Inputs whose dense structures would not fit are typed errors or fallbacks, never aborts:
+/// a sparse table whose dense F×N form is far larger than its observations, a frame whose
+/// header declares 400 megapixels, an absurd tracker window, an oversized synthetic scene;
+/// a tall table (2000 frames × 8 tracks) runs with ALS instead of the dense Wiberg solver and
+/// without the dense refinement, saying so.
+#[test]
+fn oversized_inputs_are_refused_or_degrade_gracefully() {
+    let d = tmp("budget");
+    // 20 000 frames × 20 000 tracks, 5 observations per track (the dense table: 6.8 GB).
+    let mut csv = String::from("frame,track,x,y\n");
+    for p in 0..20_000usize {
+        for k in 0..5 {
+            let f = (p + 3 * k) % 20_000;
+            csv.push_str(&format!("{f},{p},{}.5,{}.5\n", k * 10, p % 400));
+        }
+    }
+    let sparse = d.join("sparse.csv");
+    std::fs::write(&sparse, csv).unwrap();
+    let err = run_err(
+        bin()
+            .arg("reconstruct")
+            .arg(&sparse)
+            .arg("--out")
+            .arg(d.join("o1")),
+    );
+    assert!(
+        err.contains("20000 frames × 20000 tracks") && err.contains("GiB"),
+        "{err}"
+    );
+
+    // A PNG whose header declares 20 000 × 20 000 pixels (and holds almost no data).
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut c = 0xFFFF_FFFFu32;
+        for &b in bytes {
+            c ^= b as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+    let mut ihdr = b"IHDR".to_vec();
+    ihdr.extend_from_slice(&20_000u32.to_be_bytes());
+    ihdr.extend_from_slice(&20_000u32.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 0, 0, 0, 0]);
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    png.extend_from_slice(&13u32.to_be_bytes());
+    png.extend_from_slice(&ihdr);
+    png.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+    // A start of image data (the decoder reads the header up to it) and the end marker.
+    for (kind, data) in [
+        (&b"IDAT"[..], &[0x78u8, 0x9c, 0x03, 0x00][..]),
+        (&b"IEND"[..], &[][..]),
+    ] {
+        let mut chunk = kind.to_vec();
+        chunk.extend_from_slice(data);
+        png.extend_from_slice(&(data.len() as u32).to_be_bytes());
+        png.extend_from_slice(&chunk);
+        png.extend_from_slice(&crc32(&chunk).to_be_bytes());
+    }
+    let frames = d.join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    std::fs::write(frames.join("000.png"), &png).unwrap();
+    let err = run_err(
+        bin()
+            .arg("track")
+            .arg(&frames)
+            .arg("--out")
+            .arg(d.join("t.csv")),
+    );
+    assert!(
+        err.contains("20000 × 20000") && err.contains("megapixels"),
+        "{err}"
+    );
+
+    let err = run_err(
+        bin()
+            .arg("track")
+            .arg(&frames)
+            .arg("--out")
+            .arg(d.join("t.csv"))
+            .args(["--window", "100001"]),
+    );
+    assert!(err.contains("klt.window"), "{err}");
+
+    let scene = d.join("huge-synth");
+    let err = run_err(
+        bin()
+            .args(["synth", "--frames", "100000", "--points", "100000", "--out"])
+            .arg(&scene),
+    );
+    assert!(err.contains("GiB"), "{err}");
+    assert!(!scene.exists(), "synth left a folder behind");
+
+    // Tall: 2000 frames × 8 tracks, a fifth of the entries missing.
+    let mut csv = String::from("frame,track,x,y\n");
+    let pts: Vec<[f64; 3]> = (0..8)
+        .map(|p| {
+            let t = p as f64;
+            [(t * 1.3).sin(), (t * 2.1).cos(), (t * 0.7).sin() * 0.8]
+        })
+        .collect();
+    for f in 0..2000usize {
+        let a = (-30.0 + 60.0 * f as f64 / 1999.0f64).to_radians();
+        for (p, x) in pts.iter().enumerate() {
+            if f > 2 && (f * 7 + p * 3) % 5 == 0 {
+                continue;
+            }
+            let u = 200.0 * (a.cos() * x[0] + a.sin() * x[2]) + 320.0;
+            let v = 200.0 * x[1] + 240.0;
+            csv.push_str(&format!("{f},{p},{u:.4},{v:.4}\n"));
+        }
+    }
+    let tall = d.join("tall.csv");
+    std::fs::write(&tall, csv).unwrap();
+    let out = d.join("o2");
+    let log = run_ok(
+        bin()
+            .arg("reconstruct")
+            .arg(&tall)
+            .arg("--out")
+            .arg(&out)
+            .args(["--camera", "orthographic"]),
+    );
+    assert!(log.contains("Als ran instead of Wiberg"), "{log}");
+    assert!(log.contains("refinement was skipped"), "{log}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("reconstruction.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["completion"]["solver"], "als");
+    assert!(json["refinement"].is_null());
+    assert!(
+        json["rms_px"].as_f64().unwrap() < 0.01,
+        "{}",
+        json["rms_px"]
+    );
+}

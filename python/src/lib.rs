@@ -125,6 +125,7 @@ fn to_py(e: rank3::Error) -> PyErr {
         E::NoRigidMajority { .. } => (DataError::new_err(message), "no-rigid-majority", vec![]),
         E::Degenerate(_) => (DataError::new_err(message), "degenerate", vec![]),
         E::InvalidModel(_) => (DataError::new_err(message), "invalid-model", vec![]),
+        E::TooLarge { .. } => (InputError::new_err(message), "too-large", vec![]),
         _ => (Rank3Error::new_err(message), "other", vec![]),
     };
     Python::attach(|py| {

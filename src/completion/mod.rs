@@ -1068,6 +1068,29 @@ pub fn complete(
             return Err(e);
         }
     };
+    // The damped Wiberg solver's Hessian is dense, (2F·q)²: above the memory budget ALS
+    // (memory linear in the observations) runs instead, with a warning.
+    let n = 2 * problem.n_frames() * problem.q();
+    let fallback;
+    let cfg = if cfg.solver == CompletionSolverKind::Wiberg
+        && crate::budget::matrix_bytes(n, n) > crate::budget::DENSE_MATRIX_BYTES
+    {
+        let msg = format!(
+            "the Wiberg solver would need a dense {n}×{n} matrix ({:.2} GiB, over the {:.2} GiB \
+             budget) for {} frames; alternating least squares runs instead",
+            crate::budget::matrix_bytes(n, n) as f64 / (1u64 << 30) as f64,
+            crate::budget::DENSE_MATRIX_BYTES as f64 / (1u64 << 30) as f64,
+            problem.n_frames()
+        );
+        observer.on_event(&Event::Warning { message: &msg });
+        fallback = CompletionConfig {
+            solver: CompletionSolverKind::Als,
+            ..cfg.clone()
+        };
+        &fallback
+    } else {
+        cfg
+    };
     let solver = solver_for(cfg);
     let mut reports = Vec::with_capacity(cfg.runs);
     let mut best: Option<(usize, Vec<f64>, f64)> = None;

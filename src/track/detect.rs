@@ -72,10 +72,16 @@ impl DetectConfig {
                 message: format!("must be finite and ≥ 0, got {}", self.min_distance),
             });
         }
-        if self.block_size < 3 || self.block_size.is_multiple_of(2) {
+        if self.block_size < 3 || self.block_size.is_multiple_of(2) || self.block_size > 255 {
             return Err(Error::InvalidConfig {
                 field: "detect.block_size",
-                message: format!("must be odd and ≥ 3, got {}", self.block_size),
+                message: format!("must be odd, ≥ 3 and ≤ 255, got {}", self.block_size),
+            });
+        }
+        if self.max_features > 10_000_000 {
+            return Err(Error::InvalidConfig {
+                field: "detect.max_features",
+                message: format!("must be ≤ 10 000 000, got {}", self.max_features),
             });
         }
         Ok(())

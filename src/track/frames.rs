@@ -66,6 +66,7 @@ impl GrayImage {
 
     /// Reads a PNG or JPEG file and converts it to gray.
     pub fn open(path: &Path) -> Result<GrayImage> {
+        check_size(path)?;
         let img = image::open(path).map_err(|e| Error::Image {
             path: path.to_path_buf(),
             message: format!("cannot decode image: {e}"),
@@ -145,6 +146,19 @@ fn is_image_file(p: &Path) -> bool {
     )
 }
 
+/// Refuses an image above [`crate::budget::FRAME_PIXELS`] from its header, before decoding.
+fn check_size(path: &Path) -> Result<()> {
+    let dims = image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .map_err(|e| Error::io(path, e))?
+        .into_dimensions()
+        .map_err(|e| Error::Image {
+            path: path.to_path_buf(),
+            message: format!("cannot read the image header: {e}"),
+        })?;
+    crate::budget::check_frame(path, dims.0 as u64, dims.1 as u64)
+}
+
 /// A frame's id: its file stem, parsed with [`Id::parse`].
 fn frame_id(file: &Path) -> Id {
     let stem = file
@@ -202,6 +216,7 @@ impl FrameSource {
                     return Ok(None);
                 };
                 *next += 1;
+                check_size(file)?;
                 let img = image::open(file)
                     .map_err(|e| Error::Image {
                         path: file.clone(),
@@ -379,6 +394,7 @@ impl VideoReader {
                 ),
             });
         };
+        crate::budget::check_frame(path, width as u64, height as u64)?;
         if width == 0 || height == 0 {
             return Err(Error::Video {
                 path: path.to_path_buf(),

@@ -104,14 +104,23 @@ impl KltConfig {
 
     pub(crate) fn validate(&self) -> Result<()> {
         let bad = |field, message: String| Err(Error::InvalidConfig { field, message });
-        if self.window < 3 || self.window.is_multiple_of(2) {
+        if self.window < 3 || self.window.is_multiple_of(2) || self.window > 255 {
             return bad(
                 "klt.window",
-                format!("must be odd and ≥ 3, got {}", self.window),
+                format!("must be odd, ≥ 3 and ≤ 255, got {}", self.window),
             );
         }
-        if self.max_iterations == 0 {
-            return bad("klt.max_iterations", "must be ≥ 1".into());
+        if self.max_level > 12 {
+            return bad(
+                "klt.max_level",
+                format!("must be ≤ 12 (a 4096× downscale), got {}", self.max_level),
+            );
+        }
+        if self.max_iterations == 0 || self.max_iterations > 10_000 {
+            return bad(
+                "klt.max_iterations",
+                format!("must be in [1, 10000], got {}", self.max_iterations),
+            );
         }
         if !(self.epsilon > 0.0 && self.epsilon.is_finite()) {
             return bad(

@@ -164,6 +164,7 @@ pub fn parse(text: &str, path: &Path) -> Result<(TrackTable, Vec<String>)> {
         .iter()
         .map(|o| (fidx[&o.frame], tidx[&o.track], o.x, o.y))
         .collect();
+    crate::budget::check_table(Some(path), frames.len(), tracks.len(), pos.len())?;
     let mut t = TrackTable::new(frames.clone(), tracks.clone());
     for (f, p, x, y) in pos {
         t.set(f, p, x, y);

@@ -150,6 +150,7 @@ pub fn parse(text: &str, path: &Path) -> Result<TrackTable> {
     let tracks = collect(file.tracks, &|o| o.3.clone(), "tracks")?;
     let fidx: HashMap<&Id, usize> = frames.iter().enumerate().map(|(i, f)| (f, i)).collect();
     let tidx: HashMap<&Id, usize> = tracks.iter().enumerate().map(|(i, t)| (t, i)).collect();
+    crate::budget::check_table(Some(path), frames.len(), tracks.len(), obs.len())?;
     let mut t = TrackTable::new(frames.clone(), tracks.clone());
     let mut first: HashMap<(usize, usize), usize> = HashMap::new();
     for (line, k, frame, track, x, y) in &obs {
