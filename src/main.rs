@@ -398,8 +398,18 @@ fn main() -> ExitCode {
         Command::Track(a) => track_cmd(&a),
         Command::Run(a) => run_cmd(&a),
     };
+    // A recording that could not be written or streamed is an error too (after the
+    // command's own outputs, which are written by then).
+    #[cfg(feature = "rerun")]
+    let recording_failures = rank3::recording::finish_opened(std::time::Duration::from_secs(20));
+    #[cfg(not(feature = "rerun"))]
+    let recording_failures: Vec<String> = Vec::new();
+    for f in &recording_failures {
+        eprintln!("error: {f}");
+    }
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) if recording_failures.is_empty() => ExitCode::SUCCESS,
+        Ok(()) => ExitCode::FAILURE,
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::FAILURE

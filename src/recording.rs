@@ -284,6 +284,18 @@ impl RecordingArgs {
         let rec = self.open_sinks(application_id)?;
         if let Some(rec) = &rec {
             send_layout(rec, layout)?;
+            let what = [
+                self.rrd.as_ref().map(|p| p.display().to_string()),
+                self.spawn.then(|| "the spawned viewer".to_string()),
+                self.connect.clone(),
+            ]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>()
+            .join(" and ");
+            if let Ok(mut opened) = OPENED.lock() {
+                opened.push((what, rec.clone()));
+            }
         }
         Ok(rec)
     }
@@ -329,6 +341,27 @@ impl RecordingArgs {
         }
         Ok(Some(builder.set_sinks(sinks)?))
     }
+}
+
+/// The recordings [`RecordingArgs::open`] opened in this process, for [`finish_opened`].
+static OPENED: std::sync::Mutex<Vec<(String, RecordingStream)>> = std::sync::Mutex::new(Vec::new());
+
+/// Flushes every recording [`RecordingArgs::open`] opened (waiting at most `timeout` for
+/// each) and closes them; returns one message per recording that could not be written or
+/// streamed (a full disk, a viewer that is not listening, no display for `--spawn`). The
+/// command line turns these into a non-zero exit: a recording that did not happen is said.
+pub fn finish_opened(timeout: std::time::Duration) -> Vec<String> {
+    let opened = match OPENED.lock() {
+        Ok(mut o) => std::mem::take(&mut *o),
+        Err(_) => return Vec::new(),
+    };
+    let mut failures = Vec::new();
+    for (what, rec) in opened {
+        if let Err(e) = rec.flush_with_timeout(timeout) {
+            failures.push(format!("the recording to {what} was not completed: {e}"));
+        }
+    }
+    failures
 }
 
 /// Which parts of the viewer layout [`send_layout`] shows (views of absent data would sit

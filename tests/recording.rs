@@ -1421,3 +1421,32 @@ fn mesh_is_recorded_with_its_texture() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `--connect` to a port where no viewer listens: the reconstruction's files are written,
+/// and the run says the recording did not reach its viewer and exits non-zero.
+#[test]
+fn cli_connect_to_a_dead_port_is_an_error() {
+    let dir = std::env::temp_dir().join(format!("rank3-recording-dead-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let tracks =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/toy-house/tracks.csv");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rank3"))
+        .arg("reconstruct")
+        .arg(&tracks)
+        .arg("--out")
+        .arg(&dir)
+        .args([
+            "--camera",
+            "orthographic",
+            "--connect",
+            "rerun+http://127.0.0.1:9/proxy",
+        ])
+        .env("RERUN_ANALYTICS", "0")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "exit 0: {err}");
+    assert!(err.contains("was not completed"), "{err}");
+    assert!(dir.join("reconstruction.json").exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
