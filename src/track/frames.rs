@@ -76,6 +76,26 @@ impl GrayImage {
         GrayImage::from_u8(w as usize, h as usize, luma.as_raw())
     }
 
+    /// Decodes PNG or JPEG bytes (after the same size check as [`GrayImage::open`]); `name`
+    /// names the source in errors.
+    pub fn decode(bytes: &[u8], name: &Path) -> Result<GrayImage> {
+        let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| Error::io(name, e))?;
+        let (w, h) = reader.into_dimensions().map_err(|e| Error::Image {
+            path: name.to_path_buf(),
+            message: format!("cannot read the image header: {e}"),
+        })?;
+        crate::budget::check_frame(name, w as u64, h as u64)?;
+        let img = image::load_from_memory(bytes).map_err(|e| Error::Image {
+            path: name.to_path_buf(),
+            message: format!("cannot decode image: {e}"),
+        })?;
+        let luma = img.into_luma8();
+        let (w, h) = luma.dimensions();
+        GrayImage::from_u8(w as usize, h as usize, luma.as_raw())
+    }
+
     /// Writes the image as an 8-bit PNG (values clamped to `[0, 1]`).
     pub fn save_png(&self, path: &Path) -> Result<()> {
         let bytes: Vec<u8> = self

@@ -398,6 +398,11 @@ impl Tracker {
 /// point is given.
 pub fn read_init_points(path: &Path) -> Result<Vec<[f64; 2]>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    parse_init_points(&text, path)
+}
+
+/// [`read_init_points`] on text already read; `path` names it in errors.
+pub fn parse_init_points(text: &str, path: &Path) -> Result<Vec<[f64; 2]>> {
     let mut pts = Vec::new();
     for (ln, line) in text.lines().enumerate() {
         let t = line.trim();
