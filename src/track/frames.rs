@@ -66,18 +66,12 @@ impl GrayImage {
 
     /// Reads a PNG or JPEG file and converts it to gray.
     pub fn open(path: &Path) -> Result<GrayImage> {
-        check_size(path)?;
-        let img = image::open(path).map_err(|e| Error::Image {
-            path: path.to_path_buf(),
-            message: format!("cannot decode image: {e}"),
-        })?;
-        let luma = img.into_luma8();
-        let (w, h) = luma.dimensions();
-        GrayImage::from_u8(w as usize, h as usize, luma.as_raw())
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        GrayImage::decode(&bytes, path)
     }
 
-    /// Decodes PNG or JPEG bytes (after the same size check as [`GrayImage::open`]); `name`
-    /// names the source in errors.
+    /// Decodes PNG or JPEG bytes, refusing an image above [`crate::budget::FRAME_PIXELS`]
+    /// from its header before decoding it; `name` names the source in errors.
     pub fn decode(bytes: &[u8], name: &Path) -> Result<GrayImage> {
         let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
             .with_guessed_format()
