@@ -73,19 +73,7 @@ impl GrayImage {
     /// Decodes PNG or JPEG bytes, refusing an image above [`crate::budget::FRAME_PIXELS`]
     /// from its header before decoding it; `name` names the source in errors.
     pub fn decode(bytes: &[u8], name: &Path) -> Result<GrayImage> {
-        let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
-            .with_guessed_format()
-            .map_err(|e| Error::io(name, e))?;
-        let (w, h) = reader.into_dimensions().map_err(|e| Error::Image {
-            path: name.to_path_buf(),
-            message: format!("cannot read the image header: {e}"),
-        })?;
-        crate::budget::check_frame(name, w as u64, h as u64)?;
-        let img = image::load_from_memory(bytes).map_err(|e| Error::Image {
-            path: name.to_path_buf(),
-            message: format!("cannot decode image: {e}"),
-        })?;
-        let luma = img.into_luma8();
+        let luma = decode_checked(bytes, name)?.into_luma8();
         let (w, h) = luma.dimensions();
         GrayImage::from_u8(w as usize, h as usize, luma.as_raw())
     }
@@ -160,17 +148,48 @@ fn is_image_file(p: &Path) -> bool {
     )
 }
 
-/// Refuses an image above [`crate::budget::FRAME_PIXELS`] from its header, before decoding.
-fn check_size(path: &Path) -> Result<()> {
-    let dims = image::ImageReader::open(path)
-        .and_then(|r| r.with_guessed_format())
-        .map_err(|e| Error::io(path, e))?
-        .into_dimensions()
-        .map_err(|e| Error::Image {
-            path: path.to_path_buf(),
-            message: format!("cannot read the image header: {e}"),
-        })?;
-    crate::budget::check_frame(path, dims.0 as u64, dims.1 as u64)
+/// Decodes PNG or JPEG bytes after checking the size in their header against
+/// [`crate::budget::FRAME_PIXELS`] (nothing is allocated for a frame over the budget).
+fn decode_checked(bytes: &[u8], name: &Path) -> Result<image::DynamicImage> {
+    let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| Error::io(name, e))?;
+    let (w, h) = reader.into_dimensions().map_err(|e| Error::Image {
+        path: name.to_path_buf(),
+        message: format!("cannot read the image header: {e}"),
+    })?;
+    crate::budget::check_frame(name, w as u64, h as u64)?;
+    image::load_from_memory(bytes).map_err(|e| Error::Image {
+        path: name.to_path_buf(),
+        message: format!("cannot decode image: {e}"),
+    })
+}
+
+/// The next image of a folder source, decoded, with its id (`None` after the last); an image
+/// of another size than the first is an [`Error::Image`].
+fn next_folder_image(
+    files: &[PathBuf],
+    next: &mut usize,
+    size: &mut Option<(usize, usize)>,
+) -> Result<Option<(Id, image::DynamicImage)>> {
+    let Some(file) = files.get(*next) else {
+        return Ok(None);
+    };
+    *next += 1;
+    let bytes = std::fs::read(file).map_err(|e| Error::io(file, e))?;
+    let img = decode_checked(&bytes, file)?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    match *size {
+        None => *size = Some((w, h)),
+        Some((w0, h0)) if (w0, h0) != (w, h) => {
+            return Err(Error::Image {
+                path: file.clone(),
+                message: format!("frame size {w}×{h} differs from the first frame's {w0}×{h0}"),
+            });
+        }
+        Some(_) => {}
+    }
+    Ok(Some((frame_id(file), img)))
 }
 
 /// A frame's id: its file stem, parsed with [`Id::parse`].
@@ -198,24 +217,21 @@ pub enum FrameSource {
 impl FrameSource {
     /// Opens a folder of images (when `path` is a directory) or a video file.
     pub fn open(path: impl AsRef<Path>) -> Result<FrameSource> {
-        let path = path.as_ref();
-        let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-        if meta.is_dir() {
-            FrameSource::images(path)
-        } else {
-            Ok(FrameSource::Video(VideoReader::open(path)?))
-        }
+        FrameSource::open_as(path.as_ref(), false)
     }
 
     /// [`FrameSource::open`] for [`FrameSource::next_color_frame`] (a video is decoded to
     /// RGB; a folder's images are converted when read).
     pub fn open_color(path: impl AsRef<Path>) -> Result<FrameSource> {
-        let path = path.as_ref();
+        FrameSource::open_as(path.as_ref(), true)
+    }
+
+    fn open_as(path: &Path, color: bool) -> Result<FrameSource> {
         let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
         if meta.is_dir() {
             FrameSource::images(path)
         } else {
-            Ok(FrameSource::Video(VideoReader::open_as(path, true)?))
+            Ok(FrameSource::Video(VideoReader::open_as(path, color)?))
         }
     }
 
@@ -225,33 +241,7 @@ impl FrameSource {
         match self {
             FrameSource::Images {
                 files, next, size, ..
-            } => {
-                let Some(file) = files.get(*next) else {
-                    return Ok(None);
-                };
-                *next += 1;
-                check_size(file)?;
-                let img = image::open(file)
-                    .map_err(|e| Error::Image {
-                        path: file.clone(),
-                        message: format!("cannot decode image: {e}"),
-                    })?
-                    .into_rgb8();
-                let (w, h) = (img.width() as usize, img.height() as usize);
-                match *size {
-                    None => *size = Some((w, h)),
-                    Some((w0, h0)) if (w0, h0) != (w, h) => {
-                        return Err(Error::Image {
-                            path: file.clone(),
-                            message: format!(
-                                "frame size {w}×{h} differs from the first frame's {w0}×{h0}"
-                            ),
-                        });
-                    }
-                    Some(_) => {}
-                }
-                Ok(Some((frame_id(file), img)))
-            }
+            } => Ok(next_folder_image(files, next, size)?.map(|(id, img)| (id, img.into_rgb8()))),
             FrameSource::Video(v) => v.next_color_frame(),
         }
     }
@@ -315,25 +305,15 @@ impl FrameSource {
             FrameSource::Images {
                 files, next, size, ..
             } => {
-                let Some(file) = files.get(*next) else {
+                let Some((id, img)) = next_folder_image(files, next, size)? else {
                     return Ok(None);
                 };
-                *next += 1;
-                let img = GrayImage::open(file)?;
-                match *size {
-                    None => *size = Some((img.width, img.height)),
-                    Some((w, h)) if (w, h) != (img.width, img.height) => {
-                        return Err(Error::Image {
-                            path: file.clone(),
-                            message: format!(
-                                "frame size {}×{} differs from the first frame's {w}×{h}",
-                                img.width, img.height
-                            ),
-                        });
-                    }
-                    Some(_) => {}
-                }
-                Ok(Some((frame_id(file), img)))
+                let luma = img.into_luma8();
+                let (w, h) = luma.dimensions();
+                Ok(Some((
+                    id,
+                    GrayImage::from_u8(w as usize, h as usize, luma.as_raw())?,
+                )))
             }
             FrameSource::Video(v) => v.next_frame(),
         }
