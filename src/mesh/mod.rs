@@ -147,7 +147,8 @@ pub type FrameFeed<'a> = &'a mut dyn FnMut() -> Result<Option<(Id, RgbImage)>>;
 pub fn build(scene: &Scene, cfg: &MeshConfig, frames: Option<FrameFeed<'_>>) -> Result<Mesh> {
     cfg.validate()?;
     let t0 = std::time::Instant::now();
-    let (tris, surface) = surface::triangulate(scene, cfg);
+    let tracks = surface::by_track(scene);
+    let (tris, surface) = surface::triangulate(scene, &tracks, cfg);
     let seconds_surface = t0.elapsed().as_secs_f64();
     let Some(frames) = frames else {
         let mut mesh = Mesh::default();
@@ -175,7 +176,7 @@ pub fn build(scene: &Scene, cfg: &MeshConfig, frames: Option<FrameFeed<'_>>) -> 
         return Ok(mesh);
     };
     let t1 = std::time::Instant::now();
-    let mut plan = texture::plan(scene, &tris, cfg);
+    let mut plan = texture::plan(scene, &tracks, &tris, cfg);
     let mut charts_of: Vec<Vec<u32>> = vec![Vec::new(); scene.n_frames()];
     for (c, ch) in plan.charts.iter().enumerate() {
         charts_of[ch.view as usize].push(c as u32);
@@ -233,7 +234,6 @@ pub fn build(scene: &Scene, cfg: &MeshConfig, frames: Option<FrameFeed<'_>>) -> 
         .iter()
         .map(|s| (s[3] > 0.0).then(|| std::array::from_fn(|k| (s[k] / s[3]).round() as u8)))
         .collect();
-    let tracks = surface::by_track(scene);
     let mut mesh = Mesh::default();
     let mut index = std::collections::HashMap::new();
     for (i, t) in tris.iter().enumerate() {

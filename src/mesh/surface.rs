@@ -230,7 +230,8 @@ pub(crate) fn barycentric(t: &[[f64; 2]; 3], x: [f64; 2]) -> Option<[f64; 3]> {
     Some([1.0 - b1 - b2, b1, b2])
 }
 
-/// Observations of every track: `(frame, [x, y])`, frame ascending.
+/// Observations of every track in the frames that have a camera: `(frame, [x, y])`, frame
+/// ascending. Built once per mesh and shared by the stages.
 pub(crate) fn by_track(scene: &Scene) -> Vec<Vec<(u32, [f64; 2])>> {
     let mut out = vec![Vec::new(); scene.n_tracks()];
     for (f, obs) in scene.observations.iter().enumerate() {
@@ -274,8 +275,13 @@ pub(crate) fn common_views(
     out
 }
 
-/// Triangulates the scene's inlier points (module documentation).
-pub fn triangulate(scene: &Scene, cfg: &MeshConfig) -> (Vec<Triangle>, SurfaceReport) {
+/// Triangulates the scene's inlier points (module documentation); `tracks` is
+/// [`by_track`] of the scene.
+pub(crate) fn triangulate(
+    scene: &Scene,
+    tracks: &[Vec<(u32, [f64; 2])>],
+    cfg: &MeshConfig,
+) -> (Vec<Triangle>, SurfaceReport) {
     let nt = scene.n_tracks();
     let eligible: Vec<bool> = (0..nt)
         .map(|p| scene.inlier[p] && scene.points[p].is_some())
@@ -285,7 +291,6 @@ pub fn triangulate(scene: &Scene, cfg: &MeshConfig) -> (Vec<Triangle>, SurfaceRe
         eligible_tracks: n_eligible,
         ..Default::default()
     };
-    let tracks = by_track(scene);
     let pt = |p: u32| scene.points[p as usize].expect("eligible tracks have points");
     let observed_eligible = |f: usize| -> Vec<(u32, [f64; 2])> {
         scene.observations[f]
@@ -427,7 +432,7 @@ pub fn triangulate(scene: &Scene, cfg: &MeshConfig) -> (Vec<Triangle>, SurfaceRe
             }
             match check_views(
                 scene,
-                &tracks,
+                tracks,
                 tri,
                 g,
                 &x,

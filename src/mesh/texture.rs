@@ -36,7 +36,7 @@ use serde::Serialize;
 
 use super::MeshConfig;
 use super::scene::Scene;
-use super::surface::{Triangle, by_track, common_views, cross2};
+use super::surface::{Triangle, common_views, cross2};
 
 /// One chart: triangles textured from the same frame, connected through shared edges.
 #[derive(Debug, Clone)]
@@ -105,8 +105,12 @@ fn observed(tracks: &[Vec<(u32, [f64; 2])>], p: u32, f: u32) -> Option<[f64; 2]>
 }
 
 /// Chooses the views, builds and packs the charts (module documentation).
-pub(crate) fn plan(scene: &Scene, tris: &[Triangle], cfg: &MeshConfig) -> Plan {
-    let tracks = by_track(scene);
+pub(crate) fn plan(
+    scene: &Scene,
+    tracks: &[Vec<(u32, [f64; 2])>],
+    tris: &[Triangle],
+    cfg: &MeshConfig,
+) -> Plan {
     let pt = |p: u32| scene.points[p as usize].expect("mesh vertices have points");
     let choices: Vec<Choice> = tris
         .iter()
@@ -116,7 +120,7 @@ pub(crate) fn plan(scene: &Scene, tris: &[Triangle], cfg: &MeshConfig) -> Plan {
             let area = n.norm() / 2.0;
             let n = n.normalize();
             let c = (x[0] + x[1] + x[2]) / 3.0;
-            let cands: Vec<(u32, f64, f64)> = common_views(&tracks, t.tracks)
+            let cands: Vec<(u32, f64, f64)> = common_views(tracks, t.tracks)
                 .into_iter()
                 .filter_map(|(h, q)| {
                     let a = cross2(q[0], q[1], q[2]) / 2.0;
@@ -252,7 +256,7 @@ pub(crate) fn plan(scene: &Scene, tris: &[Triangle], cfg: &MeshConfig) -> Plan {
         tri_chart[i] = c;
         let b = &mut charts[c as usize].bbox;
         for p in tris[i].tracks {
-            let xy = image_position(scene, &tracks, p, view[i]);
+            let xy = image_position(scene, tracks, p, view[i]);
             b[0] = b[0].min(xy[0] - pad);
             b[1] = b[1].min(xy[1] - pad);
             b[2] = b[2].max(xy[0] + pad);
