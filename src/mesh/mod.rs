@@ -30,6 +30,7 @@ use image::RgbImage;
 use serde::Serialize;
 
 pub use scene::{Scene, View};
+use surface::Observed;
 pub use surface::{SurfaceReport, Triangle};
 pub use texture::TextureReport;
 
@@ -151,22 +152,7 @@ pub fn build(scene: &Scene, cfg: &MeshConfig, frames: Option<FrameFeed<'_>>) -> 
     let (tris, surface) = surface::triangulate(scene, &tracks, cfg);
     let seconds_surface = t0.elapsed().as_secs_f64();
     let Some(frames) = frames else {
-        let mut mesh = Mesh::default();
-        let mut index = std::collections::HashMap::new();
-        for t in &tris {
-            let tri = t.tracks.map(|p| {
-                *index.entry(p).or_insert_with(|| {
-                    let x = scene.points[p as usize].expect("vertices have points");
-                    mesh.positions.push([x[0] as f32, x[1] as f32, x[2] as f32]);
-                    mesh.colors.push([180, 180, 180]);
-                    mesh.vertex_tracks.push(p);
-                    (mesh.positions.len() - 1) as u32
-                })
-            });
-            mesh.triangles.push(tri);
-        }
-        mesh.track_colors = vec![None; scene.n_tracks()];
-        orient(&mut mesh, scene, &tris);
+        let mut mesh = assemble(scene, &tris, vec![None; scene.n_tracks()], None);
         mesh.report = MeshReport {
             surface,
             texture: None,
@@ -234,17 +220,39 @@ pub fn build(scene: &Scene, cfg: &MeshConfig, frames: Option<FrameFeed<'_>>) -> 
         .iter()
         .map(|s| (s[3] > 0.0).then(|| std::array::from_fn(|k| (s[k] / s[3]).round() as u8)))
         .collect();
+    let mut mesh = assemble(scene, &tris, track_colors, Some((&plan, &tracks)));
+    mesh.texture = Some(atlas);
+    mesh.report = MeshReport {
+        surface,
+        texture: Some(plan.report),
+        seconds_surface,
+        seconds_texture: t1.elapsed().as_secs_f64(),
+    };
+    Ok(mesh)
+}
+
+/// The mesh's vertices and triangles: one vertex per track, or per (track, chart) with a
+/// texture (the chart's camera maps it into the atlas); colours from `track_colors` (grey
+/// where a track has none); then [`orient`].
+fn assemble(
+    scene: &Scene,
+    tris: &[Triangle],
+    track_colors: Vec<Option<[u8; 3]>>,
+    textured: Option<(&texture::Plan, &[Observed])>,
+) -> Mesh {
     let mut mesh = Mesh::default();
     let mut index = std::collections::HashMap::new();
     for (i, t) in tris.iter().enumerate() {
-        let c = plan.tri_chart[i];
-        let view = plan.charts[c as usize].view;
+        let chart = textured.map(|(plan, _)| plan.tri_chart[i]);
         let tri = t.tracks.map(|p| {
-            *index.entry((p, c)).or_insert_with(|| {
+            *index.entry((p, chart)).or_insert_with(|| {
                 let x = scene.points[p as usize].expect("vertices have points");
-                let xy = texture::image_position(scene, &tracks, p, view);
                 mesh.positions.push([x[0] as f32, x[1] as f32, x[2] as f32]);
-                mesh.texcoords.push(texture::uv(&plan, c, xy));
+                if let (Some(c), Some((plan, tracks))) = (chart, textured) {
+                    let view = plan.charts[c as usize].view;
+                    let xy = texture::image_position(scene, tracks, p, view);
+                    mesh.texcoords.push(texture::uv(plan, c, xy));
+                }
                 mesh.colors
                     .push(track_colors[p as usize].unwrap_or([180, 180, 180]));
                 mesh.vertex_tracks.push(p);
@@ -253,16 +261,9 @@ pub fn build(scene: &Scene, cfg: &MeshConfig, frames: Option<FrameFeed<'_>>) -> 
         });
         mesh.triangles.push(tri);
     }
-    mesh.texture = Some(atlas);
     mesh.track_colors = track_colors;
-    orient(&mut mesh, scene, &tris);
-    mesh.report = MeshReport {
-        surface,
-        texture: Some(plan.report),
-        seconds_surface,
-        seconds_texture: t1.elapsed().as_secs_f64(),
-    };
-    Ok(mesh)
+    orient(&mut mesh, scene, tris);
+    mesh
 }
 
 /// Turns every triangle towards its reference view's camera (counter-clockwise seen from

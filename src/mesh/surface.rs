@@ -230,9 +230,12 @@ pub(crate) fn barycentric(t: &[[f64; 2]; 3], x: [f64; 2]) -> Option<[f64; 3]> {
     Some([1.0 - b1 - b2, b1, b2])
 }
 
-/// Observations of every track in the frames that have a camera: `(frame, [x, y])`, frame
-/// ascending. Built once per mesh and shared by the stages.
-pub(crate) fn by_track(scene: &Scene) -> Vec<Vec<(u32, [f64; 2])>> {
+/// One track's observations: `(frame, [x, y])`, frame ascending.
+pub(crate) type Observed = Vec<(u32, [f64; 2])>;
+
+/// The observations of every track in the frames that have a camera. Built once per mesh and
+/// shared by the stages.
+pub(crate) fn by_track(scene: &Scene) -> Vec<Observed> {
     let mut out = vec![Vec::new(); scene.n_tracks()];
     for (f, obs) in scene.observations.iter().enumerate() {
         if scene.views[f].is_none() {
@@ -246,10 +249,7 @@ pub(crate) fn by_track(scene: &Scene) -> Vec<Vec<(u32, [f64; 2])>> {
 }
 
 /// Frames observing all three tracks, with their observed positions.
-pub(crate) fn common_views(
-    tracks: &[Vec<(u32, [f64; 2])>],
-    tri: [u32; 3],
-) -> Vec<(u32, [[f64; 2]; 3])> {
+pub(crate) fn common_views(tracks: &[Observed], tri: [u32; 3]) -> Vec<(u32, [[f64; 2]; 3])> {
     let [a, b, c] = tri.map(|p| &tracks[p as usize]);
     let (mut i, mut j, mut k) = (0, 0, 0);
     let mut out = Vec::new();
@@ -279,7 +279,7 @@ pub(crate) fn common_views(
 /// [`by_track`] of the scene.
 pub(crate) fn triangulate(
     scene: &Scene,
-    tracks: &[Vec<(u32, [f64; 2])>],
+    tracks: &[Observed],
     cfg: &MeshConfig,
 ) -> (Vec<Triangle>, SurfaceReport) {
     let nt = scene.n_tracks();
@@ -485,7 +485,7 @@ enum Verdict {
 #[allow(clippy::too_many_arguments)]
 fn check_views(
     scene: &Scene,
-    tracks: &[Vec<(u32, [f64; 2])>],
+    tracks: &[Observed],
     tri: [u32; 3],
     g: usize,
     x: &[Vector3<f64>; 3],

@@ -36,7 +36,7 @@ use serde::Serialize;
 
 use super::MeshConfig;
 use super::scene::Scene;
-use super::surface::{Triangle, common_views, cross2};
+use super::surface::{Observed, Triangle, common_views, cross2};
 
 /// One chart: triangles textured from the same frame, connected through shared edges.
 #[derive(Debug, Clone)]
@@ -99,7 +99,7 @@ struct Choice {
     area: f64,
 }
 
-fn observed(tracks: &[Vec<(u32, [f64; 2])>], p: u32, f: u32) -> Option<[f64; 2]> {
+fn observed(tracks: &[Observed], p: u32, f: u32) -> Option<[f64; 2]> {
     let t = &tracks[p as usize];
     t.binary_search_by_key(&f, |o| o.0).ok().map(|i| t[i].1)
 }
@@ -107,7 +107,7 @@ fn observed(tracks: &[Vec<(u32, [f64; 2])>], p: u32, f: u32) -> Option<[f64; 2]>
 /// Chooses the views, builds and packs the charts (module documentation).
 pub(crate) fn plan(
     scene: &Scene,
-    tracks: &[Vec<(u32, [f64; 2])>],
+    tracks: &[Observed],
     tris: &[Triangle],
     cfg: &MeshConfig,
 ) -> Plan {
@@ -412,12 +412,7 @@ pub(crate) fn uv(plan: &Plan, c: u32, xy: [f64; 2]) -> [f32; 2] {
 /// Where a texture coordinate of track `p` points in frame `f`: the camera model's
 /// projection of its point (through the real projection: perspective, projective or affine),
 /// or its observed position when the model gives none.
-pub(crate) fn image_position(
-    scene: &Scene,
-    tracks: &[Vec<(u32, [f64; 2])>],
-    p: u32,
-    f: u32,
-) -> [f64; 2] {
+pub(crate) fn image_position(scene: &Scene, tracks: &[Observed], p: u32, f: u32) -> [f64; 2] {
     scene
         .project(f as usize, p as usize)
         .filter(|xy| xy.iter().all(|v| v.is_finite()))
