@@ -12,25 +12,24 @@ use std::process::Command;
 use nalgebra::Vector3;
 use rank3::track::scene3d::{Scene3d, arc_cameras, write_frames};
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_rank3"))
-}
+mod common;
+use common::{bin, run_ok};
 
 fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("rank3-mesh-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    common::tmp_dir("mesh", name)
 }
 
-fn run_ok(cmd: &mut Command) -> String {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr)
+/// `rank3 reconstruct TRACKS --out OUT --camera orthographic` plus `extra`.
+fn reconstruct(tracks: &Path, out: &Path, extra: &[&std::ffi::OsStr]) -> String {
+    run_ok(
+        bin()
+            .arg("reconstruct")
+            .arg(tracks)
+            .arg("--out")
+            .arg(out)
+            .args(["--camera", "orthographic"])
+            .args(extra),
+    )
 }
 
 /// Ten 320×240 frames of the textured corner seen along a ±20° arc.
@@ -169,17 +168,8 @@ fn reconstruct_with_images_meshes_and_the_mesh_options_work() {
     let tracks = d.join("tracks.csv");
     run_ok(bin().arg("track").arg(&imgs).arg("--out").arg(&tracks));
     let out = d.join("out");
-    let ortho = ["--camera", "orthographic"];
-    run_ok(
-        bin()
-            .arg("reconstruct")
-            .arg(&tracks)
-            .arg("--out")
-            .arg(&out)
-            .arg("--images")
-            .arg(&imgs)
-            .args(ortho),
-    );
+    let images = [std::ffi::OsStr::new("--images"), imgs.as_os_str()];
+    reconstruct(&tracks, &out, &images);
     let rec = json(&out.join("reconstruction.json"));
     assert!(rec["mesh"]["surface"]["triangles"].as_u64().unwrap() > 100);
     for f in ["mesh.obj", "mesh.mtl", "mesh_texture.png", "mesh.glb"] {
@@ -187,31 +177,15 @@ fn reconstruct_with_images_meshes_and_the_mesh_options_work() {
     }
     // Without the frames, no mesh: the earlier run's mesh files go (a folder's outputs
     // belong to one run).
-    run_ok(
-        bin()
-            .arg("reconstruct")
-            .arg(&tracks)
-            .arg("--out")
-            .arg(&out)
-            .args(ortho),
-    );
+    reconstruct(&tracks, &out, &[]);
     for f in ["mesh.obj", "mesh.mtl", "mesh_texture.png", "mesh.glb"] {
         assert!(!out.join(f).exists(), "stale {f}");
     }
     assert!(json(&out.join("reconstruction.json"))["mesh"].is_null());
     assert!(!ply_header(&out.join("points.ply")).contains("red"));
     // --no-mesh keeps the colours out too; --ply-inliers-only drops the outliers' points.
-    run_ok(
-        bin()
-            .arg("reconstruct")
-            .arg(&tracks)
-            .arg("--out")
-            .arg(&out)
-            .arg("--images")
-            .arg(&imgs)
-            .args(ortho)
-            .args(["--no-mesh", "--ply-inliers-only"]),
-    );
+    let options = ["--no-mesh", "--ply-inliers-only"].map(std::ffi::OsStr::new);
+    reconstruct(&tracks, &out, &[&images[..], &options[..]].concat());
     assert!(!out.join("mesh.glb").exists());
     let rec = json(&out.join("reconstruction.json"));
     let inliers = rec["points"]
@@ -233,7 +207,7 @@ fn reconstruct_with_images_meshes_and_the_mesh_options_work() {
         .arg(d.join("out2"))
         .arg("--images")
         .arg(&other)
-        .args(ortho)
+        .args(["--camera", "orthographic"])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
