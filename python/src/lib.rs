@@ -251,7 +251,7 @@ fn run_detached<T: Send>(
     }
 }
 
-fn settings<T: serde::Serialize + serde::de::DeserializeOwned>(
+fn apply_settings<T: serde::Serialize + serde::de::DeserializeOwned>(
     base: &T,
     json: &str,
 ) -> PyResult<T> {
@@ -384,6 +384,16 @@ fn write_tracks(
     t.write(&path).map_err(to_py)
 }
 
+/// The progress event of one tracked frame.
+fn frame_event<'py>(py: Python<'py>, s: &rank3::track::FrameStats) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("kind", "frame")?;
+    d.set_item("frame", s.frame)?;
+    d.set_item("alive", s.alive)?;
+    d.set_item("tracked", s.tracked)?;
+    Ok(d)
+}
+
 /// Tracks a folder of images or a video: `(array, frame ids, track ids)`.
 #[pyfunction]
 #[pyo3(signature = (path, settings, progress=None))]
@@ -393,20 +403,12 @@ fn track_path<'py>(
     settings: &str,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
-    let cfg = self::settings(&rank3::track::TrackerConfig::default(), settings)?;
+    let cfg = apply_settings(&rank3::track::TrackerConfig::default(), settings)?;
     let mut obs = PyObserver::new(progress);
     let (t, _) = run_detached(py, || {
         let mut src = rank3::track::FrameSource::open(&path)?;
         rank3::track::track_source(&mut src, &cfg, None, &mut |s, _| {
-            let (frame, alive, tracked) = (s.frame, s.alive, s.tracked);
-            obs.poll(true, |py| {
-                let d = PyDict::new(py);
-                d.set_item("kind", "frame")?;
-                d.set_item("frame", frame)?;
-                d.set_item("alive", alive)?;
-                d.set_item("tracked", tracked)?;
-                Ok(d)
-            })
+            obs.poll(true, |py| frame_event(py, s))
         })
     })?;
     table_to_py(py, &t)
@@ -421,7 +423,7 @@ fn track_frames<'py>(
     settings: &str,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
-    let cfg = self::settings(&rank3::track::TrackerConfig::default(), settings)?;
+    let cfg = apply_settings(&rank3::track::TrackerConfig::default(), settings)?;
     let mut tracker = rank3::track::Tracker::new(cfg).map_err(to_py)?;
     let np = py.import("numpy")?;
     for (k, frame) in frames.try_iter()?.enumerate() {
@@ -464,12 +466,7 @@ fn track_frames<'py>(
             .detach(|| tracker.push(Id::from(k), &img))
             .map_err(to_py)?;
         if let Some(cb) = &progress {
-            let d = PyDict::new(py);
-            d.set_item("kind", "frame")?;
-            d.set_item("frame", stats.frame)?;
-            d.set_item("alive", stats.alive)?;
-            d.set_item("tracked", stats.tracked)?;
-            cb.call1(py, (d,))?;
+            cb.call1(py, (frame_event(py, &stats)?,))?;
         }
     }
     let (t, _) = tracker.finish();
@@ -498,7 +495,7 @@ fn reconstruct(
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Reconstruction> {
     let table = table_from_py(&tracks, frame_ids, track_ids)?;
-    let config = self::settings(&Config::default(), settings)?;
+    let config = apply_settings(&Config::default(), settings)?;
     let mut obs = PyObserver::new(progress);
     let mut library_seconds = 0.0;
     let rec = run_detached(py, || {
