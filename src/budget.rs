@@ -5,9 +5,11 @@
 //!   `(2F·q)²` Hessian, the metric refinement's `(5F)²`–`(6F)²` reduced camera matrix) are
 //!   allowed up to [`DENSE_MATRIX_BYTES`]; above it the completion runs ALS (memory linear in
 //!   the observations) and the refinement is skipped, each with a warning.
-//! * The track table is dense (F×N entries) until the sparse table lands: a table whose dense
-//!   form would exceed both [`DENSE_TABLE_BYTES`] and [`DENSE_TABLE_FACTOR`] times the size of
-//!   its observations is refused with [`crate::Error::TooLarge`] before it is allocated.
+//! * The track table is sparse (memory of its observations); the dense pipeline's `2F×N`
+//!   matrix is built only when it fits [`DENSE_TABLE_BYTES`] or [`DENSE_TABLE_FACTOR`] times
+//!   the size of the observations; larger tables run the sparse pipeline
+//!   ([`crate::sparse`]), or are refused with [`crate::Error::TooLarge`] when the dense one
+//!   is forced.
 //! * Frames: an image or video frame above [`FRAME_PIXELS`] pixels is refused before it is
 //!   decoded.
 
@@ -21,8 +23,8 @@ pub const DENSE_TABLE_BYTES: usize = 1 << 30;
 /// observations' own size (tables that are mostly filled).
 pub const DENSE_TABLE_FACTOR: usize = 8;
 
-/// Bytes per entry of the dense track table (x, y as f64 and a visibility flag), and per
-/// observation as read (frame, track indices and x, y).
+/// Bytes per entry of the dense `2F×N` matrix and mask (x, y as f64 and a visibility flag),
+/// and per observation of the sparse table (frame, track indices and x, y).
 pub const TABLE_ENTRY_BYTES: usize = 17;
 pub const OBSERVATION_BYTES: usize = 32;
 
@@ -32,37 +34,6 @@ pub const FRAME_PIXELS: u64 = 100_000_000;
 /// Bytes of a dense `rows × cols` f64 matrix (saturating).
 pub fn matrix_bytes(rows: usize, cols: usize) -> usize {
     rows.saturating_mul(cols).saturating_mul(8)
-}
-
-/// Checks the dense F×N table of `observations` observations against the budget.
-pub fn check_table(
-    path: Option<&std::path::Path>,
-    frames: usize,
-    tracks: usize,
-    observations: usize,
-) -> crate::Result<()> {
-    let dense = frames
-        .saturating_mul(tracks)
-        .saturating_mul(TABLE_ENTRY_BYTES);
-    let own = observations
-        .saturating_mul(OBSERVATION_BYTES)
-        .saturating_mul(DENSE_TABLE_FACTOR);
-    if dense > DENSE_TABLE_BYTES && dense > own {
-        return Err(crate::Error::TooLarge {
-            what: format!(
-                "the track table{} ({frames} frames × {tracks} tracks, {observations} \
-                 observations, {:.3} % filled)",
-                path.map_or(String::new(), |p| format!(" of {}", p.display())),
-                100.0 * observations as f64 / (frames as f64 * tracks as f64).max(1.0)
-            ),
-            needed_bytes: dense,
-            budget_bytes: DENSE_TABLE_BYTES.max(own),
-            advice: "rank3 stores tables densely (F×N) for now; split the sequence into \
-                     overlapping windows of frames, or drop tracks seen in few frames"
-                .into(),
-        });
-    }
-    Ok(())
 }
 
 /// Checks a frame's size before it is decoded.

@@ -944,9 +944,9 @@ fn class_id_array(ids: Vec<u16>) -> ArrayRef {
 fn trajectories(table: &TrackTable, tracks: &[usize]) -> (Vec<f32>, Vec<usize>) {
     let mut lengths = vec![0usize; tracks.len()];
     for f in 0..table.n_frames() {
-        let (_, _, vis) = table.frame_row(f);
+        let row = table.frame_row(f);
         for (len, &p) in lengths.iter_mut().zip(tracks) {
-            *len += usize::from(vis[p]);
+            *len += usize::from(row.contains(p));
         }
     }
     let mut next: Vec<usize> = lengths
@@ -959,11 +959,11 @@ fn trajectories(table: &TrackTable, tracks: &[usize]) -> (Vec<f32>, Vec<usize>) 
         .collect();
     let mut flat = vec![0f32; 2 * lengths.iter().sum::<usize>()];
     for f in 0..table.n_frames() {
-        let (x, y, vis) = table.frame_row(f);
+        let row = table.frame_row(f);
         for (at, &p) in next.iter_mut().zip(tracks) {
-            if vis[p] {
-                flat[*at] = x[p] as f32;
-                flat[*at + 1] = y[p] as f32;
+            if let Some([x, y]) = row.get(p) {
+                flat[*at] = x as f32;
+                flat[*at + 1] = y as f32;
                 *at += 2;
             }
         }
@@ -999,8 +999,8 @@ fn observed_count(
     frames
         .into_iter()
         .map(|f| {
-            let (_, _, vis) = table.frame_row(f);
-            tracks.iter().filter(|&&p| vis[p]).count()
+            let row = table.frame_row(f);
+            tracks.iter().filter(|&&p| row.contains(p)).count()
         })
         .sum()
 }
@@ -1019,11 +1019,11 @@ fn frame_points(
     let mut lengths = Vec::with_capacity(frames.len());
     for &f in frames {
         let before = ids.len();
-        let (x, y, vis) = table.frame_row(f);
+        let row = table.frame_row(f);
         for (&p, &id) in tracks.iter().zip(&ids_of) {
-            if vis[p] {
-                flat.push(x[p] as f32);
-                flat.push(y[p] as f32);
+            if let Some([x, y]) = row.get(p) {
+                flat.push(x as f32);
+                flat.push(y as f32);
                 ids.push(id);
             }
         }
@@ -1283,8 +1283,11 @@ pub fn log_visibility(
     let cols = subsample(table.n_tracks(), options.max_image_side);
     let mut mask = Vec::with_capacity(rows.len() * cols.len());
     for &f in &rows {
-        let (_, _, vis) = table.frame_row(f);
-        mask.extend(cols.iter().map(|&p| if vis[p] { 255u8 } else { 0 }));
+        let row = table.frame_row(f);
+        mask.extend(
+            cols.iter()
+                .map(|&p| if row.contains(p) { 255u8 } else { 0 }),
+        );
     }
     rec.log(
         paths::VISIBILITY,
@@ -1328,10 +1331,10 @@ pub fn log_measurement_matrix(
     let cols: Vec<usize> = cols.iter().map(|&kp| tracks[kp]).collect();
     for (r, &kf) in rows.iter().enumerate() {
         let (wx, wy) = w[2 * r * cols.len()..(2 * r + 2) * cols.len()].split_at_mut(cols.len());
-        let (x, y, vis) = table.frame_row(frames[kf]);
+        let row = table.frame_row(frames[kf]);
         for ((&p, u), v) in cols.iter().zip(wx).zip(wy) {
-            if vis[p] {
-                (*u, *v) = (x[p] as f32, y[p] as f32);
+            if let Some([x, y]) = row.get(p) {
+                (*u, *v) = (x as f32, y as f32);
             }
         }
     }
@@ -1580,14 +1583,14 @@ fn send_residual_arrows(
         let mut lengths = Vec::with_capacity(part.len());
         for &(kf, fi) in part {
             let before = ids.len();
-            let (x, y, vis) = table.frame_row(fi);
+            let row = table.frame_row(fi);
             for (&kp, &pi) in tracks.iter().zip(&inputs) {
-                if vis[pi] {
+                if let Some([x, y]) = row.get(pi) {
                     let q = predict(kf, kp);
-                    origins.push(x[pi] as f32);
-                    origins.push(y[pi] as f32);
-                    vectors.push((q[0] - x[pi]) as f32);
-                    vectors.push((q[1] - y[pi]) as f32);
+                    origins.push(x as f32);
+                    origins.push(y as f32);
+                    vectors.push((q[0] - x) as f32);
+                    vectors.push((q[1] - y) as f32);
                     ids.push(class_id(pi));
                 }
             }

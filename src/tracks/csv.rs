@@ -5,9 +5,11 @@
 //! Order: frames and tracks are sorted ascending when all their ids are integers, and kept
 //! in order of first appearance otherwise.
 
-use std::collections::HashMap;
 use std::fmt::Write as _;
+use std::io::Read;
 use std::path::Path;
+
+use rustc_hash::FxHashMap;
 
 use super::{Id, TrackTable, order_ids};
 use crate::{Error, Result};
@@ -16,11 +18,87 @@ const FIELDS: [&str; 4] = ["frame", "track", "x", "y"];
 
 /// Parses CSV text; returns the table and the reader's warnings.
 pub fn parse(text: &str, path: &Path) -> Result<(TrackTable, Vec<String>)> {
+    parse_reader(text.as_bytes(), path)
+}
+
+/// Ids as they appear, each mapped to its index in order of first appearance. Integer ids
+/// (the common case) are hashed as integers, and the last id looked up is remembered (long
+/// tables are usually frame-major, so the frame id repeats row after row).
+#[derive(Default)]
+struct Ids {
+    ints: FxHashMap<i64, u32>,
+    strs: FxHashMap<Box<str>, u32>,
+    ids: Vec<Id>,
+    last: Option<(Vec<u8>, u32)>,
+}
+
+impl Ids {
+    fn index(&mut self, field: &[u8]) -> std::result::Result<u32, String> {
+        if let Some((bytes, i)) = &self.last
+            && bytes.as_slice() == field
+        {
+            return Ok(*i);
+        }
+        let text = std::str::from_utf8(field).map_err(|_| "is not valid UTF-8".to_string())?;
+        let next = self.ids.len() as u32;
+        let i = match Id::parse(text) {
+            Id::Int(v) => *self.ints.entry(v).or_insert_with(|| {
+                self.ids.push(Id::Int(v));
+                next
+            }),
+            Id::Str(s) => match self.strs.get(s.as_str()) {
+                Some(&i) => i,
+                None => {
+                    self.strs.insert(s.clone().into_boxed_str(), next);
+                    self.ids.push(Id::Str(s));
+                    next
+                }
+            },
+        };
+        match &mut self.last {
+            Some((bytes, j)) => {
+                bytes.clear();
+                bytes.extend_from_slice(field);
+                *j = i;
+            }
+            None => self.last = Some((field.to_vec(), i)),
+        }
+        Ok(i)
+    }
+
+    /// The ids in rank3's order ([`order_ids`]) and, per index of first appearance, its new
+    /// index.
+    fn finish(self) -> (Vec<Id>, Vec<u32>) {
+        let mut ids = self.ids;
+        let n = ids.len();
+        if ids.iter().all(|i| matches!(i, Id::Int(_))) {
+            let mut order: Vec<u32> = (0..n as u32).collect();
+            order.sort_unstable_by(|&a, &b| ids[a as usize].cmp(&ids[b as usize]));
+            let mut remap = vec![0u32; n];
+            for (new, &old) in order.iter().enumerate() {
+                remap[old as usize] = new as u32;
+            }
+            order_ids(&mut ids);
+            (ids, remap)
+        } else {
+            (ids, (0..n as u32).collect())
+        }
+    }
+}
+
+/// Parses CSV from a reader (a file is streamed, never held whole in memory); returns the
+/// table and the reader's warnings.
+///
+/// Cost: one pass over the bytes with one hash look-up per id (none when the frame id
+/// repeats), then a sort of the observations by (frame, track) to build the table and find
+/// repeated pairs: `O(n log n)` time and 24 bytes per observation plus 4 for its line.
+pub fn parse_reader<R: Read>(reader: R, path: &Path) -> Result<(TrackTable, Vec<String>)> {
     let mut rdr = ::csv::ReaderBuilder::new()
         .has_headers(true)
         .flexible(true)
         .trim(::csv::Trim::All)
-        .from_reader(text.as_bytes());
+        .buffer_capacity(1 << 20)
+        .from_reader(reader);
     let headers = rdr
         .headers()
         .map_err(|e| Error::parse(path, 1, "header", e.to_string()))?
@@ -64,28 +142,25 @@ pub fn parse(text: &str, path: &Path) -> Result<(TrackTable, Vec<String>)> {
         ));
     }
 
-    struct Obs {
-        frame: Id,
-        track: Id,
-        x: f64,
-        y: f64,
-    }
-    let mut obs = Vec::new();
-    let mut first_seen: HashMap<(Id, Id), usize> = HashMap::new();
-    let mut frames: Vec<Id> = Vec::new();
-    let mut tracks: Vec<Id> = Vec::new();
-    let mut frame_set: HashMap<Id, ()> = HashMap::new();
-    let mut track_set: HashMap<Id, ()> = HashMap::new();
-    for rec in rdr.records() {
-        let rec = rec.map_err(|e| {
-            let line = e.position().map_or(0, |p| p.line() as usize);
-            Error::parse(path, line, "row", e.to_string())
-        })?;
+    let mut obs: Vec<(u32, u32, f64, f64)> = Vec::new();
+    let mut lines: Vec<u32> = Vec::new();
+    let mut frames = Ids::default();
+    let mut tracks = Ids::default();
+    let mut rec = ::csv::ByteRecord::new();
+    loop {
+        match rdr.read_byte_record(&mut rec) {
+            Ok(true) => {}
+            Ok(false) => break,
+            Err(e) => {
+                let line = e.position().map_or(0, |p| p.line() as usize);
+                return Err(Error::parse(path, line, "row", e.to_string()));
+            }
+        }
         let line = rec.position().map_or(0, |p| p.line() as usize);
         if rec.iter().all(|f| f.is_empty()) {
             continue;
         }
-        let field = |k: usize| -> &str { rec.get(col[k]).unwrap_or("") };
+        let field = |k: usize| -> &[u8] { rec.get(col[k]).unwrap_or(b"") };
         for k in 0..2 {
             if field(k).is_empty() {
                 return Err(Error::parse(
@@ -114,41 +189,36 @@ pub fn parse(text: &str, path: &Path) -> Result<(TrackTable, Vec<String>)> {
             }
             _ => {}
         }
-        let num = |k: usize, s: &str| -> Result<f64> {
-            match s.parse::<f64>() {
-                Ok(v) if v.is_finite() => Ok(v),
-                Ok(_) => Err(Error::parse(
+        let num = |k: usize, b: &[u8]| -> Result<f64> {
+            let s = String::from_utf8_lossy(b);
+            match std::str::from_utf8(b).ok().map(str::parse::<f64>) {
+                Some(Ok(v)) if v.is_finite() => Ok(v),
+                Some(Ok(_)) => Err(Error::parse(
                     path,
                     line,
                     FIELDS[k],
-                    format!("`{s}` is not finite (leave a missing observation out)"),
+                    format!(
+                        "`{}` is not finite (leave a missing observation out)",
+                        super::excerpt(&s)
+                    ),
                 )),
-                Err(_) => Err(Error::parse(
+                _ => Err(Error::parse(
                     path,
                     line,
                     FIELDS[k],
-                    format!("`{s}` is not a number"),
+                    format!("`{}` is not a number", super::excerpt(&s)),
                 )),
             }
         };
         let (x, y) = (num(2, xs)?, num(3, ys)?);
-        let frame = Id::parse(field(0));
-        let track = Id::parse(field(1));
-        if let Some(prev) = first_seen.insert((frame.clone(), track.clone()), line) {
-            return Err(Error::parse(
-                path,
-                line,
-                "track",
-                format!("frame {frame} track {track} is given twice (first on line {prev})"),
-            ));
-        }
-        if frame_set.insert(frame.clone(), ()).is_none() {
-            frames.push(frame.clone());
-        }
-        if track_set.insert(track.clone(), ()).is_none() {
-            tracks.push(track.clone());
-        }
-        obs.push(Obs { frame, track, x, y });
+        let f = frames
+            .index(field(0))
+            .map_err(|m| Error::parse(path, line, "frame", format!("the frame id {m}")))?;
+        let p = tracks
+            .index(field(1))
+            .map_err(|m| Error::parse(path, line, "track", format!("the track id {m}")))?;
+        obs.push((f, p, x, y));
+        lines.push(u32::try_from(line).unwrap_or(u32::MAX));
     }
     if obs.is_empty() {
         return Err(Error::EmptyTable {
@@ -156,20 +226,31 @@ pub fn parse(text: &str, path: &Path) -> Result<(TrackTable, Vec<String>)> {
             reason: "no observation rows after the header".into(),
         });
     }
-    order_ids(&mut frames);
-    order_ids(&mut tracks);
-    let fidx: HashMap<&Id, usize> = frames.iter().enumerate().map(|(i, f)| (f, i)).collect();
-    let tidx: HashMap<&Id, usize> = tracks.iter().enumerate().map(|(i, t)| (t, i)).collect();
-    let pos: Vec<(usize, usize, f64, f64)> = obs
-        .iter()
-        .map(|o| (fidx[&o.frame], tidx[&o.track], o.x, o.y))
-        .collect();
-    crate::budget::check_table(Some(path), frames.len(), tracks.len(), pos.len())?;
-    let mut t = TrackTable::new(frames.clone(), tracks.clone());
-    for (f, p, x, y) in pos {
-        t.set(f, p, x, y);
+    let (frame_ids, frame_map) = frames.finish();
+    let (track_ids, track_map) = tracks.finish();
+    for o in &mut obs {
+        o.0 = frame_map[o.0 as usize];
+        o.1 = track_map[o.1 as usize];
     }
-    Ok((t, warnings))
+    TrackTable::from_observations(frame_ids, track_ids, &obs)
+        .map(|t| (t, warnings))
+        .map_err(|d| {
+            let (first, second) = if lines[d.first] <= lines[d.second] {
+                (d.first, d.second)
+            } else {
+                (d.second, d.first)
+            };
+            let o = obs[first];
+            Error::parse(
+                path,
+                lines[second] as usize,
+                "track",
+                format!(
+                    "frame {} track {} is given twice (first on line {})",
+                    d.frame_ids[o.0 as usize], d.track_ids[o.1 as usize], lines[first]
+                ),
+            )
+        })
 }
 
 /// Writes the observed entries as `frame,track,x,y` rows, frame-major.

@@ -150,9 +150,7 @@ pub fn parse(text: &str, path: &Path) -> Result<TrackTable> {
     let tracks = collect(file.tracks, &|o| o.3.clone(), "tracks")?;
     let fidx: HashMap<&Id, usize> = frames.iter().enumerate().map(|(i, f)| (f, i)).collect();
     let tidx: HashMap<&Id, usize> = tracks.iter().enumerate().map(|(i, t)| (t, i)).collect();
-    crate::budget::check_table(Some(path), frames.len(), tracks.len(), obs.len())?;
-    let mut t = TrackTable::new(frames.clone(), tracks.clone());
-    let mut first: HashMap<(usize, usize), usize> = HashMap::new();
+    let mut indexed: Vec<(u32, u32, f64, f64)> = Vec::with_capacity(obs.len());
     for (line, k, frame, track, x, y) in &obs {
         for (v, name) in [(x, "x"), (y, "y")] {
             if !v.is_finite() {
@@ -180,17 +178,21 @@ pub fn parse(text: &str, path: &Path) -> Result<TrackTable> {
                 format!("track {track} is not in `tracks`"),
             )
         })?;
-        if let Some(prev) = first.insert((f, p), *line) {
-            return Err(Error::parse(
-                path,
-                *line,
-                format!("observations[{k}]"),
-                format!("frame {frame} track {track} is given twice (first on line {prev})"),
-            ));
-        }
-        t.set(f, p, *x, *y);
+        indexed.push((f as u32, p as u32, *x, *y));
     }
-    Ok(t)
+    TrackTable::from_observations(frames, tracks, &indexed).map_err(|d| {
+        let (a, b) = (d.first.min(d.second), d.first.max(d.second));
+        let (line, k, frame, track) = (obs[b].0, obs[b].1, &obs[b].2, &obs[b].3);
+        Error::parse(
+            path,
+            line,
+            format!("observations[{k}]"),
+            format!(
+                "frame {frame} track {track} is given twice (first on line {})",
+                obs[a].0
+            ),
+        )
+    })
 }
 
 /// Serializes a table (one observation per line).

@@ -52,28 +52,86 @@ impl From<usize> for Id {
     }
 }
 
-/// F frames × N tracks of pixel observations with a visibility mask.
+/// F frames × N tracks of pixel observations, stored sparsely.
 ///
-/// Storage is frame-major: entry `(f, p)` lives at index `f * N + p`. Unobserved entries
-/// hold NaN coordinates and `visible == false`.
-#[derive(Debug, Clone)]
+/// Storage is one row per frame holding that frame's observations sorted by track index
+/// (24 bytes per observation plus 24 per frame), so memory is linear in the observations
+/// whatever the fill: a 20 000-frame video whose tracks live for tens of frames costs what
+/// its observations cost, not F×N. [`TrackTable::get`] is a binary search in the frame's
+/// row; loops over observations use [`TrackTable::frame_row`] and
+/// [`TrackTable::by_track`].
+#[derive(Debug, Clone, PartialEq)]
 pub struct TrackTable {
     frame_ids: Vec<Id>,
     track_ids: Vec<Id>,
-    x: Vec<f64>,
-    y: Vec<f64>,
-    visible: Vec<bool>,
+    rows: Vec<Vec<Entry>>,
 }
 
-impl PartialEq for TrackTable {
-    /// Same ids in the same order, same visibility, same coordinates where observed.
-    fn eq(&self, other: &Self) -> bool {
-        self.frame_ids == other.frame_ids
-            && self.track_ids == other.track_ids
-            && self.visible == other.visible
-            && (0..self.visible.len())
-                .filter(|&i| self.visible[i])
-                .all(|i| self.x[i] == other.x[i] && self.y[i] == other.y[i])
+/// One observation in a frame's row: the track index and its pixel position.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Entry {
+    pub track: u32,
+    pub x: f64,
+    pub y: f64,
+}
+
+/// Two observations of the same (frame, track) pair given to
+/// [`TrackTable::from_observations`]: their positions in its input, and its ids back.
+#[derive(Debug)]
+pub struct DuplicatePair {
+    pub first: usize,
+    pub second: usize,
+    pub frame_ids: Vec<Id>,
+    pub track_ids: Vec<Id>,
+}
+
+/// At most 40 characters of a bad field, for error messages (a hostile file's multi-megabyte
+/// field is not quoted whole).
+pub(crate) fn excerpt(s: &str) -> String {
+    const MAX: usize = 40;
+    if s.chars().count() <= MAX {
+        s.to_string()
+    } else {
+        let head: String = s.chars().take(MAX).collect();
+        format!("{head}… ({} bytes)", s.len())
+    }
+}
+
+/// A frame's observations, sorted by track index.
+#[derive(Debug, Clone, Copy)]
+pub struct Row<'a>(&'a [Entry]);
+
+impl<'a> Row<'a> {
+    /// The observation of track `p`, if this frame has one (binary search).
+    #[inline]
+    pub fn get(&self, p: usize) -> Option<[f64; 2]> {
+        self.0
+            .binary_search_by_key(&(p as u32), |e| e.track)
+            .ok()
+            .map(|i| [self.0[i].x, self.0[i].y])
+    }
+
+    /// Whether track `p` is observed in this frame.
+    #[inline]
+    pub fn contains(&self, p: usize) -> bool {
+        self.0
+            .binary_search_by_key(&(p as u32), |e| e.track)
+            .is_ok()
+    }
+
+    /// The observations, sorted by track.
+    pub fn entries(&self) -> &'a [Entry] {
+        self.0
+    }
+
+    /// Number of observations in the frame.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    /// Whether the frame has no observation.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
     }
 }
 
@@ -134,11 +192,20 @@ impl Format {
 pub fn read_tracks(path: impl AsRef<Path>) -> Result<LoadedTable> {
     let path = path.as_ref();
     let format = Format::from_path(path)?;
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
     let (table, warnings) = match format {
-        Format::Csv => csv::parse(&text, path)?,
-        Format::DenseTxt => (dense::parse(&text, path)?, Vec::new()),
-        Format::Json => (json::parse(&text, path)?, Vec::new()),
+        // Streamed: the file is never held whole in memory.
+        Format::Csv => {
+            let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+            csv::parse_reader(file, path)?
+        }
+        Format::DenseTxt | Format::Json => {
+            let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+            if format == Format::Json {
+                (json::parse(&text, path)?, Vec::new())
+            } else {
+                (dense::parse(&text, path)?, Vec::new())
+            }
+        }
     };
     Ok(LoadedTable {
         table,
@@ -150,14 +217,63 @@ pub fn read_tracks(path: impl AsRef<Path>) -> Result<LoadedTable> {
 impl TrackTable {
     /// An empty (all missing) table with the given ids.
     pub fn new(frame_ids: Vec<Id>, track_ids: Vec<Id>) -> Self {
-        let n = frame_ids.len() * track_ids.len();
+        let rows = vec![Vec::new(); frame_ids.len()];
         Self {
             frame_ids,
             track_ids,
-            x: vec![f64::NAN; n],
-            y: vec![f64::NAN; n],
-            visible: vec![false; n],
+            rows,
         }
+    }
+
+    /// A table from observations `(frame, track, x, y)` (indices into the id lists), in
+    /// any order. Sorts them by frame and track: `O(n log n)` time, memory of the
+    /// observations. A pair given twice is returned as a [`DuplicatePair`] (with the ids
+    /// handed back for the message).
+    ///
+    /// # Panics
+    /// If an index is out of range of its id list (a programming error).
+    pub fn from_observations(
+        frame_ids: Vec<Id>,
+        track_ids: Vec<Id>,
+        obs: &[(u32, u32, f64, f64)],
+    ) -> std::result::Result<Self, Box<DuplicatePair>> {
+        assert!(
+            obs.iter()
+                .all(|o| (o.0 as usize) < frame_ids.len() && (o.1 as usize) < track_ids.len()),
+            "observation index out of range"
+        );
+        let mut order: Vec<u32> = (0..obs.len() as u32).collect();
+        order.sort_unstable_by_key(|&i| {
+            let o = &obs[i as usize];
+            (o.0, o.1, i)
+        });
+        for w in order.windows(2) {
+            let (a, b) = (&obs[w[0] as usize], &obs[w[1] as usize]);
+            if a.0 == b.0 && a.1 == b.1 {
+                return Err(Box::new(DuplicatePair {
+                    first: w[0] as usize,
+                    second: w[1] as usize,
+                    frame_ids,
+                    track_ids,
+                }));
+            }
+        }
+        let mut counts = vec![0usize; frame_ids.len()];
+        obs.iter().for_each(|o| counts[o.0 as usize] += 1);
+        let mut rows: Vec<Vec<Entry>> = counts.iter().map(|&c| Vec::with_capacity(c)).collect();
+        for &i in &order {
+            let o = &obs[i as usize];
+            rows[o.0 as usize].push(Entry {
+                track: o.1,
+                x: o.2,
+                y: o.3,
+            });
+        }
+        Ok(Self {
+            frame_ids,
+            track_ids,
+            rows,
+        })
     }
 
     /// Reads a table by extension (`.csv`, `.txt`, `.json`). Reader warnings are discarded;
@@ -210,63 +326,93 @@ impl TrackTable {
         &self.track_ids
     }
 
+    /// Frame `f`'s observations, sorted by track.
     #[inline]
-    fn idx(&self, f: usize, p: usize) -> usize {
-        f * self.track_ids.len() + p
+    pub fn frame_row(&self, f: usize) -> Row<'_> {
+        Row(&self.rows[f])
     }
 
-    /// Frame `f`'s row: x, y and visibility of every track (x and y are meaningless where
-    /// not visible). For loops over whole frames without a bounds check per entry.
-    #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
-    pub(crate) fn frame_row(&self, f: usize) -> (&[f64], &[f64], &[bool]) {
-        let r = f * self.track_ids.len()..(f + 1) * self.track_ids.len();
-        (&self.x[r.clone()], &self.y[r.clone()], &self.visible[r])
+    /// Per track, its observations as `(frame, x, y)` in frame order (CSR: `ptr` has N + 1
+    /// entries, track `p`'s are `obs[ptr[p]..ptr[p + 1]]`). `O(n_obs)`.
+    pub fn by_track(&self) -> (Vec<usize>, Vec<(u32, f64, f64)>) {
+        let n = self.n_tracks();
+        let mut ptr = vec![0usize; n + 1];
+        for row in &self.rows {
+            for e in row {
+                ptr[e.track as usize + 1] += 1;
+            }
+        }
+        for p in 0..n {
+            ptr[p + 1] += ptr[p];
+        }
+        let mut fill = ptr.clone();
+        let mut obs = vec![(0u32, 0.0, 0.0); ptr[n]];
+        for (f, row) in self.rows.iter().enumerate() {
+            for e in row {
+                let at = &mut fill[e.track as usize];
+                obs[*at] = (f as u32, e.x, e.y);
+                *at += 1;
+            }
+        }
+        (ptr, obs)
     }
 
     /// The observation of track `p` in frame `f`, if any.
     pub fn get(&self, f: usize, p: usize) -> Option<[f64; 2]> {
-        let i = self.idx(f, p);
-        self.visible[i].then(|| [self.x[i], self.y[i]])
+        self.frame_row(f).get(p)
     }
 
-    /// Sets an observation (coordinates must be finite; the readers check this).
+    /// Sets an observation (coordinates must be finite; the readers check this). Appending
+    /// in increasing track order is `O(1)`; otherwise the frame's row is shifted.
     pub fn set(&mut self, f: usize, p: usize, x: f64, y: f64) {
-        let i = self.idx(f, p);
-        self.x[i] = x;
-        self.y[i] = y;
-        self.visible[i] = true;
+        assert!(p < self.track_ids.len(), "track index out of range");
+        let row = &mut self.rows[f];
+        let e = Entry {
+            track: p as u32,
+            x,
+            y,
+        };
+        match row.last() {
+            Some(last) if last.track < p as u32 => row.push(e),
+            None => row.push(e),
+            _ => match row.binary_search_by_key(&(p as u32), |e| e.track) {
+                Ok(i) => row[i] = e,
+                Err(i) => row.insert(i, e),
+            },
+        }
     }
 
     /// Removes an observation.
     pub fn unset(&mut self, f: usize, p: usize) {
-        let i = self.idx(f, p);
-        self.x[i] = f64::NAN;
-        self.y[i] = f64::NAN;
-        self.visible[i] = false;
+        let row = &mut self.rows[f];
+        if let Ok(i) = row.binary_search_by_key(&(p as u32), |e| e.track) {
+            row.remove(i);
+        }
     }
 
     /// Whether track `p` is observed in frame `f`.
     pub fn is_visible(&self, f: usize, p: usize) -> bool {
-        self.visible[self.idx(f, p)]
+        self.frame_row(f).contains(p)
     }
 
     /// Number of observed (frame, track) pairs.
     pub fn n_observed(&self) -> usize {
-        self.visible.iter().filter(|&&v| v).count()
+        self.rows.iter().map(Vec::len).sum()
     }
 
     /// Fraction of (frame, track) pairs observed.
     pub fn fill(&self) -> f64 {
-        if self.visible.is_empty() {
+        let cells = self.n_frames() as f64 * self.n_tracks() as f64;
+        if cells == 0.0 {
             0.0
         } else {
-            self.n_observed() as f64 / self.visible.len() as f64
+            self.n_observed() as f64 / cells
         }
     }
 
     /// True when every track is seen in every frame.
     pub fn is_complete(&self) -> bool {
-        self.visible.iter().all(|&v| v)
+        self.rows.iter().all(|r| r.len() == self.n_tracks())
     }
 
     /// Number of frames in which track `p` is seen.
@@ -278,41 +424,60 @@ impl TrackTable {
 
     /// Number of tracks seen in frame `f`.
     pub fn frame_len(&self, f: usize) -> usize {
-        (0..self.n_tracks())
-            .filter(|&p| self.is_visible(f, p))
-            .count()
+        self.rows[f].len()
     }
 
-    /// The numeric 2F×N observation matrix and mask the solvers use.
+    /// Bytes of the dense 2F×N matrix and mask that [`TrackTable::measurements`] builds.
+    pub fn dense_bytes(&self) -> usize {
+        self.n_frames()
+            .saturating_mul(self.n_tracks())
+            .saturating_mul(crate::budget::TABLE_ENTRY_BYTES)
+    }
+
+    /// The numeric 2F×N observation matrix and mask the dense solvers use (`O(F·N)`
+    /// memory; the pipeline checks [`TrackTable::dense_bytes`] against the budget first).
     pub fn measurements(&self) -> Measurements {
         let (f, n) = (self.n_frames(), self.n_tracks());
-        let w = faer::Mat::from_fn(2 * f, n, |r, p| {
-            let i = self.idx(r / 2, p);
-            if !self.visible[i] {
-                0.0
-            } else if r % 2 == 0 {
-                self.x[i]
-            } else {
-                self.y[i]
+        let mut w = faer::Mat::zeros(2 * f, n);
+        let mut visible = vec![false; f * n];
+        for (fi, row) in self.rows.iter().enumerate() {
+            for e in row {
+                let p = e.track as usize;
+                w[(2 * fi, p)] = e.x;
+                w[(2 * fi + 1, p)] = e.y;
+                visible[fi * n + p] = true;
             }
-        });
-        Measurements::new(w, self.visible.clone())
+        }
+        Measurements::new(w, visible)
     }
 
     /// The sub-table of the given frames and tracks (indices into this table, in order).
+    /// `O(n_obs of the frames + N)`.
     pub fn select(&self, frames: &[usize], tracks: &[usize]) -> TrackTable {
-        let mut t = TrackTable::new(
-            frames.iter().map(|&f| self.frame_ids[f].clone()).collect(),
-            tracks.iter().map(|&p| self.track_ids[p].clone()).collect(),
-        );
-        for (nf, &f) in frames.iter().enumerate() {
-            for (np, &p) in tracks.iter().enumerate() {
-                if let Some([x, y]) = self.get(f, p) {
-                    t.set(nf, np, x, y);
-                }
-            }
+        let mut new_index = vec![u32::MAX; self.n_tracks()];
+        for (k, &p) in tracks.iter().enumerate() {
+            new_index[p] = k as u32;
         }
-        t
+        let rows = frames
+            .iter()
+            .map(|&f| {
+                let mut row: Vec<Entry> = self.rows[f]
+                    .iter()
+                    .filter(|e| new_index[e.track as usize] != u32::MAX)
+                    .map(|e| Entry {
+                        track: new_index[e.track as usize],
+                        ..*e
+                    })
+                    .collect();
+                row.sort_unstable_by_key(|e| e.track);
+                row
+            })
+            .collect();
+        TrackTable {
+            frame_ids: frames.iter().map(|&f| self.frame_ids[f].clone()).collect(),
+            track_ids: tracks.iter().map(|&p| self.track_ids[p].clone()).collect(),
+            rows,
+        }
     }
 
     /// Sets aside, repeatedly until stable, tracks seen in fewer than `min_frames_per_track`
@@ -333,13 +498,17 @@ impl TrackTable {
         let mut out = Vec::new();
         loop {
             let mut changed = false;
+            let mut track_count = vec![0usize; nt];
+            for (f, row) in self.rows.iter().enumerate() {
+                if keep_f[f] {
+                    row.iter().for_each(|e| track_count[e.track as usize] += 1);
+                }
+            }
             for p in 0..nt {
                 if !keep_t[p] {
                     continue;
                 }
-                let c = (0..nf)
-                    .filter(|&f| keep_f[f] && self.is_visible(f, p))
-                    .count();
+                let c = track_count[p];
                 if c < min_frames_per_track {
                     keep_t[p] = false;
                     changed = true;
@@ -356,8 +525,9 @@ impl TrackTable {
                 if !keep_f[f] {
                     continue;
                 }
-                let c = (0..nt)
-                    .filter(|&p| keep_t[p] && self.is_visible(f, p))
+                let c = self.rows[f]
+                    .iter()
+                    .filter(|e| keep_t[e.track as usize])
                     .count();
                 if c < min_points_per_frame {
                     keep_f[f] = false;
@@ -423,41 +593,55 @@ impl TrackTable {
     }
 
     /// Connected components (frames, tracks) of the bipartite graph restricted to the given
-    /// frames and tracks; isolated frames/tracks form their own components.
+    /// frames and tracks, ordered by their first frame; tracks no given frame sees form
+    /// their own components, last. Union–find over the observations: `O(n_obs α)`.
     fn components(&self, frames: &[usize], tracks: &[usize]) -> Vec<(Vec<usize>, Vec<usize>)> {
         let (nf, nt) = (self.n_frames(), self.n_tracks());
-        let mut in_f = vec![false; nf];
         let mut in_t = vec![false; nt];
-        frames.iter().for_each(|&f| in_f[f] = true);
         tracks.iter().for_each(|&p| in_t[p] = true);
-        let mut seen_f = vec![false; nf];
-        let mut seen_t = vec![false; nt];
-        let mut comps = Vec::new();
-        for &start in frames {
-            if seen_f[start] {
-                continue;
+        // Nodes: frames 0..nf, tracks nf..nf+nt.
+        let mut parent: Vec<usize> = (0..nf + nt).collect();
+        fn find(parent: &mut [usize], mut a: usize) -> usize {
+            while parent[a] != a {
+                parent[a] = parent[parent[a]];
+                a = parent[a];
             }
-            let (mut cf, mut ct) = (Vec::new(), Vec::new());
-            let mut stack_f = vec![start];
-            seen_f[start] = true;
-            while let Some(f) = stack_f.pop() {
-                cf.push(f);
-                for p in 0..nt {
-                    if in_t[p] && !seen_t[p] && self.is_visible(f, p) {
-                        seen_t[p] = true;
-                        ct.push(p);
-                        for g in 0..nf {
-                            if in_f[g] && !seen_f[g] && self.is_visible(g, p) {
-                                seen_f[g] = true;
-                                stack_f.push(g);
-                            }
-                        }
+            a
+        }
+        let mut seen_t = vec![false; nt];
+        for &f in frames {
+            for e in &self.rows[f] {
+                let p = e.track as usize;
+                if in_t[p] {
+                    seen_t[p] = true;
+                    let (a, b) = (find(&mut parent, f), find(&mut parent, nf + p));
+                    if a != b {
+                        // The smaller root (a frame when one is present) represents.
+                        let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+                        parent[hi] = lo;
                     }
                 }
             }
-            cf.sort_unstable();
-            ct.sort_unstable();
-            comps.push((cf, ct));
+        }
+        let mut comp_of_root = vec![usize::MAX; nf + nt];
+        let mut comps: Vec<(Vec<usize>, Vec<usize>)> = Vec::new();
+        for &f in frames {
+            let r = find(&mut parent, f);
+            if comp_of_root[r] == usize::MAX {
+                comp_of_root[r] = comps.len();
+                comps.push((Vec::new(), Vec::new()));
+            }
+            comps[comp_of_root[r]].0.push(f);
+        }
+        for &p in tracks {
+            if seen_t[p] {
+                let r = find(&mut parent, nf + p);
+                comps[comp_of_root[r]].1.push(p);
+            }
+        }
+        for c in &mut comps {
+            c.0.sort_unstable();
+            c.1.sort_unstable();
         }
         for &p in tracks {
             if !seen_t[p] {
