@@ -7,6 +7,8 @@
 //! observation matrix `W` (2F×N) → rank-3 factorization (centering + truncated SVD for
 //! complete data, low-rank completion for missing data) → metric upgrade
 //! ([`metric`]) → Levenberg–Marquardt refinement ([`refine`]) → [`reconstruction::Reconstruction`].
+//! Tables whose dense W does not fit run the [`sparse`] pipeline (memory linear in the
+//! observations).
 //!
 //! References: C. Tomasi and T. Kanade, "Shape and motion from image streams under
 //! orthography: a factorization method", IJCV 9(2), 1992; C. J. Poelman and T. Kanade,
@@ -43,6 +45,7 @@ pub mod sdp;
 pub mod segment;
 pub mod settings;
 pub mod solver;
+pub mod sparse;
 pub mod svd;
 pub mod synth;
 pub mod track;

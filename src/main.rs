@@ -524,6 +524,10 @@ fn write_outputs(
             .collect()
     });
     let mut keep = rank3::output::RECONSTRUCTION_FILES.to_vec();
+    if rec.sparse.is_some() {
+        // No completed.txt (see output::Written); an earlier run's is removed.
+        keep.retain(|&f| f != "completed.txt");
+    }
     if rec.perspective.is_some() {
         keep.push("colmap");
     }
@@ -730,7 +734,11 @@ fn print_summary(rec: &Reconstruction, out: &Path) {
         "affine fit RMS {:.6} px; metric upgrade by {:?} (least-squares L min eigenvalue {:.3e})",
         rec.factorization.rms_px, rec.metric_upgrade.method, rec.metric_upgrade.min_eigenvalue_ls
     );
-    if let Some(r) = &rec.refinement {
+    if let Some(r) = &rec.refinement
+        && let Some(why) = &r.skipped
+    {
+        eprintln!("refinement: skipped: {why}");
+    } else if let Some(r) = &rec.refinement {
         eprintln!(
             "refinement: RMS {:.6} → {:.6} px ({:?}, {} iterations, {:.3} s)",
             r.rms_before_px, r.rms_after_px, r.status, r.iterations, r.seconds

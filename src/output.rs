@@ -12,7 +12,9 @@ use crate::{Error, Id, Result};
 #[derive(Debug, Clone)]
 pub struct Written {
     pub json: PathBuf,
-    pub completed: PathBuf,
+    /// Not written (None) for a sparse-pipeline reconstruction: a dense 2F×N matrix of a
+    /// table too large to hold densely is not an output anyone can read.
+    pub completed: Option<PathBuf>,
     pub ply: PathBuf,
 }
 
@@ -47,7 +49,12 @@ pub fn write_all_with(
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let [json, completed, ply] = RECONSTRUCTION_FILES.map(|name| dir.join(name));
     crate::atomic::write(&json, rec.to_json())?;
-    write_completed(rec, &completed)?;
+    let completed = if rec.sparse.is_none() {
+        write_completed(rec, &completed)?;
+        Some(completed)
+    } else {
+        None
+    };
     write_ply_with(rec, &ply, ply_opts)?;
     Ok(Written {
         json,

@@ -70,6 +70,11 @@ pub struct Config {
     /// The Euclidean upgrade and metric bundle adjustment, used with
     /// [`CameraModel::Perspective`] (known intrinsics go in its `intrinsics`).
     pub perspective: PerspectiveConfig,
+    /// The sparse pipeline, for tables whose dense matrix does not fit
+    /// ([`crate::sparse`]); its `pipeline` field chooses. Default
+    /// [`crate::sparse::SparseConfig::default`].
+    #[serde(default)]
+    pub sparse: crate::sparse::SparseConfig,
     /// Warn "far from rank 3" when σ4/σ3 exceeds this. Default 0.1.
     pub rank3_warning_ratio: f64,
     /// Warn "close to rank 2" when σ3/σ2 is below this. Default 0.05.
@@ -101,6 +106,7 @@ impl Default for Config {
             refine: Some(RefineConfig::default()),
             projective: ProjectiveConfig::default(),
             perspective: PerspectiveConfig::default(),
+            sparse: crate::sparse::SparseConfig::default(),
             rank3_warning_ratio: 0.1,
             rank2_warning_ratio: 0.05,
         }
@@ -259,6 +265,8 @@ pub struct RefinementReport {
     pub status: SolverStatus,
     pub iterations: usize,
     pub seconds: f64,
+    /// Why the refinement did not run (it could not gain enough), when it did not.
+    pub skipped: Option<String>,
 }
 
 /// One frame's projective camera.
@@ -742,6 +750,10 @@ pub struct Reconstruction {
     pub mirrored: bool,
     pub warnings: Vec<String>,
     pub timings: Vec<StageTime>,
+    /// Present when the sparse pipeline ran ([`crate::sparse`]): the table's dense matrix
+    /// did not fit, or it was asked for. The dense-only stages (RANSAC robust pass,
+    /// σ4/σ3, refinement, projective and perspective cameras, completed.txt) did not run.
+    pub sparse: Option<crate::sparse::SparseReport>,
     /// Present when a textured surface was built ([`crate::mesh`]; `rank3 run`, or
     /// `reconstruct --images`): its triangulation, texture and timing report.
     pub mesh: Option<crate::mesh::MeshReport>,
@@ -852,6 +864,20 @@ impl Reconstruction {
             table.set_aside(config.min_frames_per_track, min_points)
         });
         check_size(&kept)?;
+        if let Some(reason) = sparse_reason(&kept, config)? {
+            return sparse_reconstruction(
+                table,
+                Kept {
+                    table: &kept,
+                    frames: kept_frames,
+                    tracks: kept_tracks,
+                    set_aside,
+                },
+                config,
+                timer,
+                reason,
+            );
+        }
         let meas_all = kept.measurements();
 
         // Robust pass: outlier tracks and gross entries.
@@ -1295,6 +1321,7 @@ impl Reconstruction {
             warnings,
             timings: timer.timings,
             mesh: None,
+            sparse: None,
             model,
             affine_structure: affine.s_hat.clone(),
             affine_prediction,
@@ -1312,9 +1339,27 @@ impl Reconstruction {
     /// track order); rows/columns of set-aside frames/tracks are NaN. With the projective
     /// camera it is `π(P_f X_p)`, otherwise the affine prediction `M̂Ŝ + t1ᵀ`. Outlier
     /// tracks are predicted from their own observations given the fitted cameras.
+    ///
+    /// A sparse-pipeline reconstruction ([`Reconstruction::sparse`]) has no affine
+    /// prediction: its matrix holds the metric model's. `O(F·N)` memory either way.
     pub fn completed_matrix(&self) -> Mat<f64> {
         let (f, n) = (self.input_frame_ids.len(), self.input_track_ids.len());
         let mut out = Mat::from_fn(2 * f, n, |_, _| f64::NAN);
+        if self.sparse.is_some() {
+            for (kf, &fi) in self.kept_frames.iter().enumerate() {
+                for (kp, &pi) in self.kept_tracks.iter().enumerate() {
+                    let q = self.model.project(kf, kp);
+                    out[(2 * fi, pi)] = q[0];
+                    out[(2 * fi + 1, pi)] = q[1];
+                }
+                for (k, &pi) in self.outlier_tracks.iter().enumerate() {
+                    let q = self.outlier_model.project(kf, k);
+                    out[(2 * fi, pi)] = q[0];
+                    out[(2 * fi + 1, pi)] = q[1];
+                }
+            }
+            return out;
+        }
         if let Some(pr) = &self.perspective {
             for (kf, &fi) in self.kept_frames.iter().enumerate() {
                 for (kp, &pi) in self.kept_tracks.iter().enumerate() {
@@ -1541,6 +1586,30 @@ fn fit_selection(
         }
         fits
     });
+    // The affine fit bounds what a metric model reaches: a refinement that cannot gain more
+    // than `min_relative_gain` of it is skipped, and its report says so.
+    let mut skipped_refinement = None;
+    let refine_cfg = refine_cfg.filter(|rc| {
+        let metric_rms = model.rms(&meas);
+        let affine_rms = affine.report.rms_px;
+        let worth = !(metric_rms - affine_rms <= rc.min_relative_gain * affine_rms);
+        if !worth {
+            skipped_refinement = Some(RefinementReport {
+                rms_before_px: metric_rms,
+                rms_after_px: metric_rms,
+                status: SolverStatus::Converged,
+                iterations: 0,
+                seconds: 0.0,
+                skipped: Some(format!(
+                    "the metric model's RMS {metric_rms:.6} px is within {:.2} % of the affine \
+                     fit's {affine_rms:.6} px, which bounds what refining can reach \
+                     (refine.min_relative_gain)",
+                    100.0 * rc.min_relative_gain
+                )),
+            });
+        }
+        worth
+    });
     let refinement = match refine_cfg {
         Some(rc) => {
             let r: RefineResult = timer.run("refine", |obs| {
@@ -1555,9 +1624,10 @@ fn fit_selection(
                 status: r.report.status,
                 iterations: r.report.iterations,
                 seconds: r.report.seconds,
+                skipped: None,
             })
         }
-        None => None,
+        None => skipped_refinement,
     };
     refine::fix_gauge(&mut model, affine_camera);
     let mirrored = metric::apply_necker_convention(&mut model);
@@ -2084,4 +2154,281 @@ fn initial_model(
     };
     model.triangulate(meas);
     Ok(model)
+}
+
+/// [`crate::sparse::Pipeline::Auto`] treats a table of at least this many frames …
+const BANDED_MIN_FRAMES: usize = 120;
+/// … filled below this fraction as a video of short tracks: the sparse pipeline.
+const BANDED_MAX_FILL: f64 = 0.25;
+
+/// Why the sparse pipeline runs for `kept` (None: the dense one runs), or a
+/// [`Error::TooLarge`] when the dense pipeline is forced on a table it cannot hold.
+fn sparse_reason(kept: &TrackTable, config: &Config) -> Result<Option<String>> {
+    use crate::budget;
+    use crate::sparse::Pipeline;
+    let dense = kept.dense_bytes();
+    let own = kept
+        .n_observed()
+        .saturating_mul(budget::OBSERVATION_BYTES)
+        .saturating_mul(budget::DENSE_TABLE_FACTOR);
+    let table_fits = dense <= budget::DENSE_TABLE_BYTES || dense <= own;
+    let f = kept.n_frames();
+    match config.sparse.pipeline {
+        Pipeline::Sparse => Ok(Some("asked for (pipeline = sparse)".into())),
+        Pipeline::Dense if !table_fits => Err(Error::TooLarge {
+            what: format!(
+                "the dense track table ({} frames × {} tracks, {} observations, {:.3} % filled)",
+                f,
+                kept.n_tracks(),
+                kept.n_observed(),
+                100.0 * kept.fill()
+            ),
+            needed_bytes: dense,
+            budget_bytes: budget::DENSE_TABLE_BYTES.max(own),
+            advice: "use the sparse pipeline (--pipeline auto or sparse)".into(),
+        }),
+        Pipeline::Dense => Ok(None),
+        Pipeline::Auto if !table_fits => Ok(Some(format!(
+            "the dense {f}×{} table would take {:.2} GiB for {} observations ({:.3} % filled)",
+            kept.n_tracks(),
+            dense as f64 / (1u64 << 30) as f64,
+            kept.n_observed(),
+            100.0 * kept.fill()
+        ))),
+        // A long table whose tracks are short (a video): the dense pipeline's RANSAC pass
+        // needs tracks that span the sequence and finds no rigid majority, and its affine
+        // completion drifts (docs/math.md §13). The projective and perspective cameras
+        // exist only in the dense pipeline.
+        Pipeline::Auto
+            if f >= BANDED_MIN_FRAMES
+                && kept.fill() < BANDED_MAX_FILL
+                && !matches!(
+                    config.camera,
+                    CameraModel::Projective | CameraModel::Perspective
+                ) =>
+        {
+            Ok(Some(format!(
+                "a long sequence of short tracks ({f} frames, {:.1} % filled): the dense \
+                 pipeline needs tracks that span the sequence",
+                100.0 * kept.fill()
+            )))
+        }
+        Pipeline::Auto => Ok(None),
+    }
+}
+
+/// The table left after setting aside, with its indices into the input.
+struct Kept<'a> {
+    table: &'a TrackTable,
+    frames: Vec<usize>,
+    tracks: Vec<usize>,
+    set_aside: Vec<SetAside>,
+}
+
+/// The sparse pipeline ([`crate::sparse`]) and its [`Reconstruction`]: frames, points,
+/// metric upgrade and reports; the dense-only parts are empty (`affine_prediction` 0×0,
+/// no completed matrix).
+fn sparse_reconstruction(
+    table: &TrackTable,
+    kept: Kept<'_>,
+    config: &Config,
+    mut timer: Timer<'_>,
+    reason: String,
+) -> Result<Reconstruction> {
+    let Kept {
+        table: kept,
+        frames: kept_frames,
+        tracks: kept_tracks,
+        mut set_aside,
+    } = kept;
+    let mut warnings = vec![format!(
+        "sparse pipeline: {reason}; the dense-only stages (RANSAC robust pass, σ4/σ3, metric \
+         refinement, projective and perspective cameras, completed.txt) do not run"
+    )];
+    let affine_camera = config.camera.affine();
+    let t0 = Instant::now();
+    let (prob, fit) = timer.run("sparse-fit", |obs| {
+        crate::sparse::fit(kept, &config.sparse, affine_camera, obs)
+    })?;
+    if let Some(n) = &fit.note {
+        warnings.push(format!("sparse pipeline: {n}"));
+    }
+    if fit.report.status != SolverStatus::Converged {
+        warnings.push(format!(
+            "sparse bundle adjustment ended with status {:?} after {} iterations",
+            fit.report.status, fit.report.iterations
+        ));
+    }
+    let mut all = prob.metric_model(&fit.cams, &fit.pts);
+    // The metric upgrade of the adjusted cameras' rows: a check (Q ≈ I up to scale) and
+    // the report the dense pipeline gives.
+    let m_rows = Mat::from_fn(2 * kept.n_frames(), 3, |r, k| {
+        all.scales[r / 2] * all.rotations[r / 2].matrix()[(r % 2, k)]
+    });
+    let upgrade = timer.run("metric-upgrade", |_| {
+        metric::upgrade(m_rows.as_ref(), affine_camera, &config.metric)
+    })?;
+    let nf = kept.n_frames();
+    prob.triangulate(&mut all);
+    let mirrored = metric::apply_necker_convention(&mut all);
+    let (frame_res, track_res) = prob.residuals(&all);
+    let inlier = &fit.inlier;
+    let inl: Vec<usize> = (0..kept.n_tracks()).filter(|&p| inlier[p]).collect();
+    let out: Vec<usize> = (0..kept.n_tracks()).filter(|&p| !inlier[p]).collect();
+    // Frame residuals over the inlier tracks only.
+    let mut frame_fit = frame_res.clone();
+    if !out.is_empty() {
+        frame_fit.iter_mut().for_each(|r| *r = (0.0, 0));
+        let g = &prob.graph;
+        for &p in &inl {
+            for o in g.track(p) {
+                let f = g.cam[o];
+                let d = all.project(f, p) - prob.pixel(o);
+                frame_fit[f].0 += d.norm_squared();
+                frame_fit[f].1 += 1;
+            }
+        }
+    }
+    let (ss, n): (f64, usize) = inl.iter().fold((0.0, 0), |(s, n), &p| {
+        (s + track_res[p].0, n + track_res[p].1)
+    });
+    let metric_rms_px = rms_of(ss, n);
+    let frames: Vec<FrameResult> = (0..nf)
+        .map(|f| {
+            let r = all.rotations[f].matrix();
+            FrameResult {
+                frame: kept.frame_ids()[f].clone(),
+                rotation: std::array::from_fn(|a| std::array::from_fn(|b| r[(a, b)])),
+                translation: [all.translations[f][0], all.translations[f][1]],
+                scale: all.scales[f],
+                rms_px: rms_of(frame_fit[f].0, frame_fit[f].1),
+                n_observations: frame_fit[f].1,
+            }
+        })
+        .collect();
+    let points: Vec<PointResult> = (0..kept.n_tracks())
+        .map(|p| {
+            let x = all.points[p];
+            PointResult {
+                track: kept.track_ids()[p].clone(),
+                xyz: [x[0], x[1], x[2]],
+                inlier: inlier[p],
+                rms_px: rms_of(track_res[p].0, track_res[p].1),
+                n_observations: track_res[p].1,
+            }
+        })
+        .collect();
+    let robust = (config.robust.is_some()).then(|| {
+        let mut r = RobustReport {
+            n_inlier_tracks: 0,
+            n_outlier_tracks: 0,
+            n_flagged_entries: 0,
+            outlier_tracks: Vec::new(),
+            flagged_entries: Vec::new(),
+            noise_sigma_px: fit.sigma_px,
+            threshold_px: fit.threshold_px,
+            entry_threshold_px: f64::NAN,
+            iterations: fit.rounds,
+            projective: None,
+            inliers_per_iteration: Vec::new(),
+            flagged_indices: Vec::new(),
+            rigid_groups_seen: 1,
+            other_object_tracks: 0,
+            seconds: t0.elapsed().as_secs_f64(),
+        };
+        r.update(kept, &kept_frames, &kept_tracks, inlier, &[]);
+        r
+    });
+    if !out.is_empty() {
+        warnings.push(format!(
+            "sparse pipeline: {} outlier track(s) over {:.2} px RMS excluded from the fit",
+            out.len(),
+            fit.threshold_px
+        ));
+    }
+    if !set_aside.is_empty() {
+        warnings.push(format!(
+            "{} track(s) and {} frame(s) set aside (see `set_aside`)",
+            set_aside
+                .iter()
+                .filter(|s| s.kind == crate::tracks::SetAsideKind::Track)
+                .count(),
+            set_aside
+                .iter()
+                .filter(|s| s.kind == crate::tracks::SetAsideKind::Frame)
+                .count()
+        ));
+    }
+    set_aside.shrink_to_fit();
+    for w in &warnings {
+        timer.observer.on_event(&Event::Warning { message: w });
+    }
+    let pick = |v: &[usize]| MetricModel {
+        rotations: all.rotations.clone(),
+        translations: all.translations.clone(),
+        scales: all.scales.clone(),
+        points: v.iter().map(|&p| all.points[p]).collect(),
+    };
+    let model = pick(&inl);
+    let outlier_model = pick(&out);
+    // The structure the factorization gave (metric here: the sparse fit is metric).
+    let affine_structure = Mat::from_fn(3, inl.len(), |k, j| all.points[inl[j]][k]);
+    let seconds = t0.elapsed().as_secs_f64();
+    Ok(Reconstruction {
+        camera_model: affine_camera,
+        model_selection: None,
+        frames,
+        points,
+        rms_px: metric_rms_px,
+        metric_rms_px,
+        metric_upgrade: upgrade,
+        singular_values: Vec::new(),
+        rank_ratio: f64::NAN,
+        rank_ratio_source: "not computed by the sparse pipeline".into(),
+        factorization: FactorizationReport {
+            method: "sparse-varpro".into(),
+            svd_method: "none".into(),
+            svd_fallback_reason: None,
+            rms_px: fit.rms_px,
+        },
+        completion: None,
+        robust,
+        refinement: None,
+        projective: None,
+        perspective: None,
+        input: InputSummary {
+            frames: table.n_frames(),
+            tracks: table.n_tracks(),
+            observations: table.n_observed(),
+            fill: table.fill(),
+            frames_used: nf,
+            tracks_used: inl.len(),
+        },
+        set_aside,
+        mirrored,
+        warnings,
+        timings: timer.timings,
+        mesh: None,
+        sparse: Some(crate::sparse::SparseReport {
+            reason,
+            observations: prob.graph.n_obs(),
+            status: fit.report.status,
+            iterations: fit.report.iterations,
+            rms_px: fit.rms_px,
+            schur_nonzeros: fit.schur_nonzeros,
+            rounds: fit.rounds,
+            skipped_windows: fit.skipped_windows,
+            seconds,
+        }),
+        model,
+        affine_structure,
+        affine_prediction: Mat::zeros(0, 0),
+        outlier_prediction: Mat::zeros(0, 0),
+        outlier_model,
+        kept_frames: kept_frames.clone(),
+        kept_tracks: inl.iter().map(|&p| kept_tracks[p]).collect(),
+        outlier_tracks: out.iter().map(|&p| kept_tracks[p]).collect(),
+        input_frame_ids: table.frame_ids().to_vec(),
+        input_track_ids: table.track_ids().to_vec(),
+    })
 }

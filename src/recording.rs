@@ -1853,6 +1853,9 @@ pub fn summary_markdown(r: &Reconstruction) -> String {
             .map_or(String::new(), |why| format!(", fallback: {why}")),
         r.metric_upgrade.method,
         match &r.refinement {
+            Some(f) if f.skipped.is_some() => {
+                format!("skipped ({})", f.skipped.as_deref().unwrap_or(""))
+            }
             Some(f) => format!(
                 "RMS {:.6} → {:.6} px ({:?}, {} iterations)",
                 f.rms_before_px, f.rms_after_px, f.status, f.iterations

@@ -67,6 +67,17 @@ pub struct RefineConfig {
     pub initial_lambda: f64,
     /// Stalled when λ would exceed this without a successful step. Default 1e12.
     pub max_lambda: f64,
+    /// The pipeline skips the refinement when the metric model's RMS exceeds the affine
+    /// fit's by less than this fraction of the latter: the affine model contains every
+    /// metric one, so its optimum bounds what refining can reach, and the refinement could
+    /// not gain more. (It took 57 s of a 77 s run on a 1000 × 20 000 table to move the RMS
+    /// by 2·10⁻⁶ px.) 0 always refines. Default 1e-3.
+    #[serde(default = "default_min_relative_gain")]
+    pub min_relative_gain: f64,
+}
+
+fn default_min_relative_gain() -> f64 {
+    1e-3
 }
 
 impl Default for RefineConfig {
@@ -78,6 +89,7 @@ impl Default for RefineConfig {
             gradient_tolerance: 1e-10,
             initial_lambda: 1e-4,
             max_lambda: 1e12,
+            min_relative_gain: default_min_relative_gain(),
         }
     }
 }

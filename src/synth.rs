@@ -1273,3 +1273,134 @@ mod tests {
         assert!(generate(&perspective(1.25)).is_ok());
     }
 }
+
+/// A long, sparse, video-like table under the scaled orthographic camera (the affine model
+/// holds exactly), with its ground truth: a camera travelling along a corridor of points,
+/// each track seen while it is in the 640-pixel-wide view (about `view_frames` frames) or
+/// until it is lost (2 % per frame). For the sparse pipeline's tests and benchmarks.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CorridorConfig {
+    pub frames: usize,
+    /// Tracks visible in a frame, on average. Default 150.
+    pub per_frame: usize,
+    /// Frames a point stays in view (before losses). Default 30.
+    pub view_frames: usize,
+    /// Image noise σ, pixels. Default 0.5.
+    pub noise: f64,
+    pub seed: u64,
+}
+
+impl Default for CorridorConfig {
+    fn default() -> Self {
+        Self {
+            frames: 1000,
+            per_frame: 150,
+            view_frames: 30,
+            noise: 0.5,
+            seed: 0,
+        }
+    }
+}
+
+/// [`CorridorConfig`]'s table and the true metric model (frames × tracks of the table).
+///
+/// Camera `f`: rotation wobbling by up to 0.5 rad about the corridor's axis and the
+/// vertical (periods of ~70–80 frames), scale 40 px per unit varying by ±10 %, moving 640 / `view_frames` pixels per
+/// frame along the corridor. Points fill a slab 2 units deep, so depth is well determined
+/// by the rotation. `O(n_obs)` time and memory.
+pub fn corridor(cfg: &CorridorConfig) -> Result<(TrackTable, MetricModel)> {
+    if cfg.frames < 2 || cfg.per_frame < 4 || cfg.view_frames < 2 {
+        return Err(Error::InvalidConfig {
+            field: "corridor",
+            message: "frames ≥ 2, per_frame ≥ 4 and view_frames ≥ 2 needed".into(),
+        });
+    }
+    let mut rng = StdRng::seed_from_u64(cfg.seed);
+    let noise = Normal::new(0.0, cfg.noise.max(0.0)).map_err(|e| Error::InvalidConfig {
+        field: "noise",
+        message: e.to_string(),
+    })?;
+    let scale0 = 40.0;
+    let width = 640.0 / scale0; // view width, units
+    let speed = width / cfg.view_frames as f64; // units per frame
+    let rotations: Vec<Rotation3<f64>> = (0..cfg.frames)
+        .map(|f| {
+            let a = f as f64;
+            Rotation3::from_euler_angles(
+                0.5 * (a / 11.0).sin(),
+                0.5 * (a / 13.0).cos(),
+                0.1 * (a / 47.0).sin(),
+            )
+        })
+        .collect();
+    let scales: Vec<f64> = (0..cfg.frames)
+        .map(|f| scale0 * (1.0 + 0.1 * (f as f64 / 97.0).sin()))
+        .collect();
+    // Camera centre along x; t_f = 320 − s R (c, 0, 0) so that the centre projects mid-image.
+    let centres: Vec<Vector3<f64>> = (0..cfg.frames)
+        .map(|f| Vector3::new(speed * f as f64, 0.0, 0.0))
+        .collect();
+    let translations: Vec<Vector2<f64>> = (0..cfg.frames)
+        .map(|f| {
+            let r = rotations[f].matrix();
+            let p = r * centres[f] * scales[f];
+            Vector2::new(320.0 - p[0], 240.0 - p[1])
+        })
+        .collect();
+    let length = speed * cfg.frames as f64 + width;
+    let n = ((cfg.per_frame as f64) * length / width).ceil() as usize;
+    let mut pts = Vec::with_capacity(n);
+    let mut obs: Vec<(u32, u32, f64, f64)> = Vec::new();
+    for _ in 0..n {
+        let x = Vector3::new(
+            rng.random_range(-width / 2.0..length - width / 2.0),
+            rng.random_range(-5.0..5.0),
+            rng.random_range(-1.0..1.0),
+        );
+        // Frames where the point is inside the view, then a random loss.
+        let first = ((x[0] - width / 2.0) / speed).ceil().max(0.0) as usize;
+        let mut track = Vec::new();
+        for f in first..cfg.frames {
+            let r = rotations[f].matrix();
+            let q = (r * x * scales[f]).xy() + translations[f];
+            if q[0] < 0.0 || q[0] > 640.0 {
+                if f > first + 2 {
+                    break;
+                }
+                continue;
+            }
+            track.push((f, q));
+            if rng.random::<f64>() < 0.02 {
+                break;
+            }
+        }
+        if track.len() < 2 {
+            continue;
+        }
+        let p = pts.len() as u32;
+        pts.push(x);
+        for (f, q) in track {
+            obs.push((
+                f as u32,
+                p,
+                q[0] + noise.sample(&mut rng),
+                q[1] + noise.sample(&mut rng),
+            ));
+        }
+    }
+    let table = TrackTable::from_observations(
+        (0..cfg.frames).map(Id::from).collect(),
+        (0..pts.len()).map(Id::from).collect(),
+        &obs,
+    )
+    .unwrap_or_else(|_| unreachable!("one observation per frame and track"));
+    Ok((
+        table,
+        MetricModel {
+            rotations,
+            translations,
+            scales,
+            points: pts,
+        },
+    ))
+}

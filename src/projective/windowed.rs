@@ -353,7 +353,7 @@ fn local_refine(
     Ok(())
 }
 
-fn too_few_shared(start: usize, end: usize, have: usize, need: usize) -> Error {
+pub(crate) fn too_few_shared(start: usize, end: usize, have: usize, need: usize) -> Error {
     Error::Degenerate(format!(
         "frames {start}..{end} share {have} track(s) with the frames before them ({need} \
          needed to chain the windows)"
@@ -361,7 +361,7 @@ fn too_few_shared(start: usize, end: usize, have: usize, need: usize) -> Error {
 }
 
 /// The window's affine completion, errors naming the window.
-fn complete_window(
+pub(crate) fn complete_window(
     start: usize,
     end: usize,
     tracks: &[usize],
@@ -379,7 +379,7 @@ fn complete_window(
 /// Calls `each(start, end, tracks, meas)` for every window in order: frames
 /// `start..end`, the tracks seen in ≥ 2 of them (indices into `g`) and their dense
 /// measurements (window frames × those tracks).
-fn for_each_window(
+pub(crate) fn for_each_window(
     g: &Graph,
     cfg: &WindowConfig,
     mut each: impl FnMut(usize, usize, &[usize], &Measurements) -> Result<()>,

@@ -741,6 +741,36 @@ mod tests {
     }
 
     #[test]
+    fn sparse_rows_by_track_select_and_duplicates() {
+        let obs = [(1u32, 2u32, 5.0, 6.0), (0, 2, 1.0, 2.0), (1, 0, 3.0, 4.0)];
+        let ids = |n: usize| (0..n).map(Id::from).collect::<Vec<_>>();
+        let t = TrackTable::from_observations(ids(2), ids(3), &obs).unwrap();
+        assert_eq!(t.n_observed(), 3);
+        assert_eq!(t.get(1, 2), Some([5.0, 6.0]));
+        assert_eq!(t.get(0, 0), None);
+        assert_eq!(t.frame_row(1).len(), 2);
+        let (ptr, by) = t.by_track();
+        assert_eq!(ptr, vec![0, 1, 1, 3]);
+        assert_eq!(by[1..], [(0, 1.0, 2.0), (1, 5.0, 6.0)]);
+        // Select reorders tracks; rows stay sorted.
+        let s = t.select(&[1], &[2, 0]);
+        assert_eq!(s.get(0, 0), Some([5.0, 6.0]));
+        assert_eq!(s.get(0, 1), Some([3.0, 4.0]));
+        let d =
+            TrackTable::from_observations(ids(2), ids(3), &[(0, 1, 0.0, 0.0), (0, 1, 1.0, 1.0)])
+                .unwrap_err();
+        assert_eq!((d.first.min(d.second), d.first.max(d.second)), (0, 1));
+        // Out-of-order sets and unsets keep the rows sorted.
+        let mut u = TrackTable::new(ids(1), ids(4));
+        for p in [3, 1, 2, 0] {
+            u.set(0, p, p as f64, 0.0);
+        }
+        u.unset(0, 2);
+        let tracks: Vec<u32> = u.frame_row(0).entries().iter().map(|e| e.track).collect();
+        assert_eq!(tracks, vec![0, 1, 3]);
+    }
+
+    #[test]
     fn measurements_layout() {
         let t = table(&[&[1, 0], &[1, 1]]);
         let m = t.measurements();

@@ -1,0 +1,206 @@
+//! Time and peak memory of the sparse affine pipeline ([`rank3::sparse`]) as a long,
+//! sparse, video-like table grows ([`rank3::synth::corridor`]: scaled orthographic camera
+//! travelling along a corridor of points, tracks alive ~30 frames, 0.5 px noise), through
+//! `Reconstruction::from_tracks` with the default configuration (the sparse pipeline is
+//! chosen automatically once the dense table does not fit; `--sparse` forces it). Each size
+//! runs in its own process so that its peak resident memory (`VmHWM`) is its own.
+//! Accuracy: reprojection RMS and structure error against the ground truth (after the best
+//! similarity). `--compare` also runs the dense
+//! pipeline on the same table (where it fits) and prints the largest difference of the two
+//! results' structure errors.
+//!
+//! `cargo run --release --example sparse_scaling -- [FRAMES ...] [--per-frame K] [--sparse]
+//! [--compare]` (default 1000 2000 5000 10000 20000; K, default 150, sets the density).
+//! The growth exponents are the log–log slopes of time and memory against the number of
+//! observations between the smallest and the largest size.
+
+use std::process::Command;
+use std::time::Instant;
+
+use rank3::eval;
+use rank3::sparse::Pipeline;
+use rank3::synth::{CorridorConfig, corridor};
+use rank3::{Config, Reconstruction};
+
+fn peak_rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// Structure error (RMS distance after the best similarity, reflection allowed, over the
+/// RMS spread) of a reconstruction's kept tracks against the truth.
+fn accuracy(r: &Reconstruction, truth: &rank3::MetricModel) -> f64 {
+    let tru: Vec<_> = r.kept_tracks.iter().map(|&p| truth.points[p]).collect();
+    eval::structure_error(&r.model.points, &tru)
+}
+
+/// With `VERBOSE` set, prints every solver iteration and stage to stderr.
+struct Printer;
+
+impl rank3::Observer for Printer {
+    fn on_event(&mut self, e: &rank3::Event<'_>) {
+        if std::env::var_os("VERBOSE").is_none() {
+            return;
+        }
+        match e {
+            rank3::Event::Iteration {
+                solver,
+                run,
+                iteration,
+                rms,
+                lambda,
+                ..
+            } => eprintln!("{solver}[{run}] {iteration} rms {rms:.6} lambda {lambda:.3e}"),
+            rank3::Event::StageFinished { stage, seconds } => {
+                eprintln!("stage {stage}: {seconds:.2} s")
+            }
+            _ => {}
+        }
+    }
+}
+
+fn child(frames: usize, per_frame: usize, sparse: bool, compare: bool) {
+    let t0 = Instant::now();
+    let (table, truth) = corridor(&CorridorConfig {
+        frames,
+        per_frame,
+        ..CorridorConfig::default()
+    })
+    .expect("corridor");
+    let gen_s = t0.elapsed().as_secs_f64();
+    let mut config = Config {
+        camera: rank3::CameraModel::ScaledOrthographic,
+        ..Config::default()
+    };
+    if sparse {
+        config.sparse.pipeline = Pipeline::Sparse;
+    }
+    let t1 = Instant::now();
+    let r = Reconstruction::from_tracks_observed(&table, &config, &mut Printer)
+        .expect("reconstruction");
+    let run_s = t1.elapsed().as_secs_f64();
+    let structure = accuracy(&r, &truth);
+    let mut line = format!(
+        "{frames:>6} frames {:>8} tracks {:>9} obs | generate {gen_s:6.2} s | reconstruct \
+         {run_s:7.2} s | peak {:7.0} MB | {} | RMS {:.4} px | structure {:.3} % \
+         | outliers {} | iterations {}",
+        table.n_tracks(),
+        table.n_observed(),
+        peak_rss_mb(),
+        if r.sparse.is_some() {
+            "sparse"
+        } else {
+            "dense "
+        },
+        r.rms_px,
+        100.0 * structure,
+        r.outlier_tracks.len(),
+        r.sparse.as_ref().map_or(0, |s| s.iterations),
+    );
+    if compare {
+        let mut dense = config.clone();
+        dense.sparse.pipeline = Pipeline::Dense;
+        let t2 = Instant::now();
+        match Reconstruction::from_tracks(&table, &dense) {
+            Ok(d) => {
+                let dstruct = accuracy(&d, &truth);
+                line += &format!(
+                    " || dense {:.2} s RMS {:.4} px structure {:.3} %",
+                    t2.elapsed().as_secs_f64(),
+                    d.rms_px,
+                    100.0 * dstruct
+                );
+            }
+            Err(e) => line += &format!(" || dense: {e}"),
+        }
+    }
+    println!("{line}");
+    if std::env::var_os("PROFILE").is_some() {
+        for chunk in r.frames.chunks(50) {
+            let worst = chunk.iter().map(|f| f.rms_px).fold(0.0, f64::max);
+            println!(
+                "        frames {}..: worst frame RMS {worst:.2} px",
+                chunk[0].frame
+            );
+        }
+    }
+    for w in r.warnings.iter().skip(1) {
+        println!("        warning: {w}");
+    }
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let flag = |name: &str| args.iter().any(|a| a == name);
+    let value = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+            .and_then(|v| v.parse::<usize>().ok())
+    };
+    let per_frame = value("--per-frame").unwrap_or(150);
+    let (sparse, compare) = (flag("--sparse"), flag("--compare"));
+    if let Some(f) = value("--child") {
+        child(f, per_frame, sparse, compare);
+        return;
+    }
+    let mut sizes: Vec<usize> = args
+        .iter()
+        .enumerate()
+        .filter(|(i, a)| !a.starts_with("--") && (*i == 0 || args[i - 1] != "--per-frame"))
+        .filter_map(|(_, a)| a.parse().ok())
+        .collect();
+    if sizes.is_empty() {
+        sizes = vec![1000, 2000, 5000, 10000, 20000];
+    }
+    println!(
+        "sparse pipeline on corridor tables ({per_frame} tracks per frame), one process per size"
+    );
+    let exe = std::env::current_exe().expect("exe");
+    let mut points = Vec::new();
+    for &f in &sizes {
+        let mut cmd = Command::new(&exe);
+        cmd.args([
+            "--child",
+            &f.to_string(),
+            "--per-frame",
+            &per_frame.to_string(),
+        ]);
+        if sparse {
+            cmd.arg("--sparse");
+        }
+        if compare {
+            cmd.arg("--compare");
+        }
+        let out = cmd.output().expect("child");
+        let text = String::from_utf8_lossy(&out.stdout);
+        print!("{text}");
+        if !out.status.success() {
+            eprintln!("{}", String::from_utf8_lossy(&out.stderr));
+            continue;
+        }
+        let num = |key: &str| -> Option<f64> {
+            let first = text.lines().next()?;
+            let i = first.find(key)?;
+            first[..i].split_whitespace().last()?.parse().ok()
+        };
+        if let (Some(obs), Some(secs), Some(mb)) = (num(" obs"), num(" s | peak"), num(" MB")) {
+            points.push((obs, secs, mb));
+        }
+    }
+    if points.len() >= 2 {
+        let (a, b) = (points[0], points[points.len() - 1]);
+        let slope = |ya: f64, yb: f64| (yb / ya).ln() / (b.0 / a.0).ln();
+        println!(
+            "growth exponents (vs observations): time {:.2}, peak memory {:.2}",
+            slope(a.1, b.1),
+            slope(a.2, b.2)
+        );
+    }
+}

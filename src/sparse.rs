@@ -1,0 +1,966 @@
+//! The sparse pipeline: tables whose dense `2F×N` matrix does not fit (a long video with
+//! short tracks, a huge table) or that are long sequences of short tracks are reconstructed
+//! with memory linear in the observations (docs/math.md §13).
+//!
+//! # Objective
+//!
+//! The scaled orthographic (orthographic: `s_f ≡ 1`) reprojection error over the observed
+//! entries — the dense pipeline's metric objective:
+//!
+//! ```text
+//!   minimise over R_f ∈ SO(3), s_f, t_f, X_p:  Σ_{(f,p) observed} ‖s_f R_f[1:2] X_p + t_f − w_fp‖²,
+//! ```
+//!
+//! in coordinates centred on the observations' mean and (not for the orthographic camera)
+//! scaled to unit RMS spread, undone on output.
+//!
+//! # Method
+//!
+//! 1. **Start** ([`SparseProblem::start`]): overlapping windows of frames, each completed by
+//!    the dense damped Wiberg solver (a window is small; the windows in parallel), upgraded
+//!    to metric on its own and chained by similarities over the tracks they share; a window
+//!    that does not fit is restarted, then bridged by an affine map. Linear in the frames.
+//!    (Chaining affine windows and upgrading once does not work on long sequences: the
+//!    affine chain drifts by shear and stretch that one `L = QQᵀ` cannot undo.)
+//! 2. **Adjustment**: the sparse Levenberg–Marquardt engine of
+//!    [`crate::projective::bundle`] with the [`ScaledOrthographic`] residual — rotations on
+//!    SO(3), points eliminated by the Schur complement and re-solved after every camera step
+//!    (variable projection), the reduced camera system (6 unknowns per frame) banded for a
+//!    video and factorised by sparse Cholesky, `O(F b² 6³)` for a half-bandwidth of `b`
+//!    frames. The 7-dimensional similarity gauge is held by springs on frames 0 and 1.
+//! 3. **Outlier tracks**: when the adjustment converged, a track whose RMS residual exceeds
+//!    [`SparseConfig::outlier_sigmas`] robust standard deviations of all residuals (and
+//!    [`SparseConfig::min_outlier_px`]) is rejected whole and the fit is repeated once from
+//!    the current cameras — the linear-cost substitute for the dense RANSAC pass. A
+//!    rejection that would starve a frame is not made (reported in [`SparseFit::note`]).
+//! 4. **Output**: the metric model (cameras in pixels, points re-triangulated per track),
+//!    and a metric upgrade of its camera rows as a check (`Q ≈ I`).
+//!
+//! # Complexity
+//!
+//! Memory: the table (24 bytes per observation), the graph (24), the windows' dense
+//! measurements during the start, and the engine's per-observation blocks (`W_fp` 6×3 and
+//! the camera Jacobian 2×12), plus the non-zeros of the reduced camera system and its
+//! factor (`O(F b 36)`); nothing is `O(F·N)` or `O(F²)`. Time: the window fits, linear in
+//! the frames, then per iteration linear in the observations plus the banded
+//! factorisation. The number of iterations still grows on long sequences
+//! (docs/results.md).
+//!
+//! # References
+//!
+//! * C. Tomasi and T. Kanade, "Shape and motion from image streams under orthography: a
+//!   factorization method", IJCV 9(2), 1992.
+//! * T. Okatani and K. Deguchi, "On the Wiberg algorithm for matrix factorization in the
+//!   presence of missing components", IJCV 72(3), 2007.
+//! * J. H. Hong, C. Zach and A. Fitzgibbon, "Revisiting the variable projection method for
+//!   separable nonlinear least squares problems", CVPR 2017.
+//! * B. Triggs, P. McLauchlan, R. Hartley and A. Fitzgibbon, "Bundle adjustment — a modern
+//!   synthesis", 1999 (the Schur complement).
+//! * S. Umeyama, "Least-squares estimation of transformation parameters between two point
+//!   patterns", PAMI 13(4), 1991 (the windows' similarities).
+
+use nalgebra::{Matrix3, Matrix4, Rotation3, Vector2, Vector3, Vector4};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::projective::bundle::{self, BundleModel, Graph, Jacobians, LmConfig, Progress};
+use crate::projective::windowed::{self, WindowConfig};
+use crate::tracks::TrackTable;
+use crate::{CameraModel, Error, MetricModel, Observer, Result, SolverReport};
+
+/// Which pipeline runs: the dense one (every stage, `O(F·N)` memory) or the sparse one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Pipeline {
+    /// Sparse when the dense `2F×N` matrix exceeds both
+    /// [`crate::budget::DENSE_TABLE_BYTES`] and [`crate::budget::DENSE_TABLE_FACTOR`] times
+    /// the observations' own size, or when the table is a long sequence of short tracks
+    /// (≥ 120 frames, < 25 % filled) and the camera is not projective or perspective;
+    /// dense otherwise (the default).
+    #[default]
+    Auto,
+    /// Always the dense pipeline (an input too large for it is a typed error).
+    Dense,
+    /// Always the sparse pipeline.
+    Sparse,
+}
+
+/// Settings of the sparse pipeline. Every field has a documented default.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SparseConfig {
+    /// Which pipeline runs. Default [`Pipeline::Auto`].
+    pub pipeline: Pipeline,
+    /// The windowed start. Default: windows of 40 frames overlapping by 20, affine chaining
+    /// (`projective: false`).
+    pub window: WindowConfig,
+    /// The variable-projection adjustment. Default: [`LmConfig::default`] with at most 100
+    /// solves and a relative cost tolerance of 1e-10.
+    pub lm: LmConfig,
+    /// Reject a track whose RMS residual exceeds this many robust standard deviations
+    /// (1.4826 × the median absolute residual) of all residuals. Default 4. `f64::INFINITY`
+    /// keeps every track.
+    pub outlier_sigmas: f64,
+    /// ... and exceeds this many pixels. Default 2 (as the dense pass's track floor).
+    pub min_outlier_px: f64,
+    /// Largest RMS distance, relative to their spread, between a window's shared points
+    /// and the points already placed after the best similarity, for the window to be
+    /// chained. Default 0.1 (windows that fit leave 1–3 %).
+    pub max_window_mismatch: f64,
+    /// Random restarts of a window's completion when it does not fit. Default 4.
+    pub window_restarts: usize,
+}
+
+impl Default for SparseConfig {
+    fn default() -> Self {
+        Self {
+            pipeline: Pipeline::Auto,
+            window: WindowConfig {
+                projective: false,
+                ..WindowConfig::default()
+            },
+            lm: LmConfig {
+                max_iterations: 100,
+                function_tolerance: 1e-10,
+                ..LmConfig::default()
+            },
+            outlier_sigmas: 4.0,
+            min_outlier_px: 2.0,
+            max_window_mismatch: 0.1,
+            window_restarts: 4,
+        }
+    }
+}
+
+/// What the sparse pipeline did, in `reconstruction.json` (`sparse`).
+#[derive(Debug, Clone, Serialize)]
+pub struct SparseReport {
+    /// Why the sparse pipeline ran.
+    pub reason: String,
+    /// Observations fitted.
+    pub observations: usize,
+    /// The variable-projection adjustment of the final round.
+    pub status: crate::SolverStatus,
+    pub iterations: usize,
+    /// RMS of the affine fit over observed scalars, pixels.
+    pub rms_px: f64,
+    /// Non-zeros of the reduced camera system (lower triangle).
+    pub schur_nonzeros: usize,
+    /// Rounds of fit + outlier rejection (1 or 2).
+    pub rounds: usize,
+    /// Windows of the start that did not fit and were skipped.
+    pub skipped_windows: usize,
+    pub seconds: f64,
+}
+
+/// The scaled orthographic camera residual `r = s R₁₂ x + t − w` for the sparse engine
+/// (orthographic: `s ≡ 1`). Camera stored as `[R (9, row-major), s, t (2)]` with `R` on
+/// SO(3) (tangent `R [δ]ₓ`, re-orthonormalised after each step), point `x ∈ R³`: 6 (5)
+/// tangent parameters per camera, 3 per point.
+#[derive(Debug, Clone, Copy)]
+pub struct ScaledOrthographic {
+    /// Whether the scale is a parameter (false: orthographic, `s` stays as given).
+    pub scaled: bool,
+}
+
+impl ScaledOrthographic {
+    /// `R [e_k]ₓ` flattened (row-major), the rotation's tangent direction `k`.
+    fn rot_dir(c: &[f64], k: usize) -> [f64; 9] {
+        let mut e = [[0.0; 3]; 3];
+        // [e_k]ₓ
+        let (a, b) = ((k + 1) % 3, (k + 2) % 3);
+        e[a][b] = -1.0;
+        e[b][a] = 1.0;
+        let mut out = [0.0; 9];
+        for i in 0..3 {
+            for j in 0..3 {
+                out[3 * i + j] = (0..3).map(|m| c[3 * i + m] * e[m][j]).sum();
+            }
+        }
+        out
+    }
+}
+
+impl BundleModel for ScaledOrthographic {
+    fn cam_len(&self) -> usize {
+        12
+    }
+    fn cam_dim(&self) -> usize {
+        if self.scaled { 6 } else { 5 }
+    }
+    fn pt_len(&self) -> usize {
+        3
+    }
+    fn pt_dim(&self) -> usize {
+        3
+    }
+    fn res_dim(&self) -> usize {
+        2
+    }
+
+    #[inline]
+    fn eval(
+        &self,
+        c: &[f64],
+        x: &[f64],
+        _glob: &[f64],
+        w: [f64; 2],
+        r: &mut [f64],
+        jac: Option<Jacobians<'_>>,
+    ) {
+        let s = c[9];
+        let a = c[0] * x[0] + c[1] * x[1] + c[2] * x[2];
+        let b = c[3] * x[0] + c[4] * x[1] + c[5] * x[2];
+        r[0] = s * a + c[10] - w[0];
+        r[1] = s * b + c[11] - w[1];
+        if let Some(Jacobians {
+            cam: jc, pt: jp, ..
+        }) = jac
+        {
+            jc.fill(0.0);
+            for k in 0..3 {
+                jc[k] = s * x[k];
+                jc[12 + 3 + k] = s * x[k];
+                jp[k] = s * c[k];
+                jp[3 + k] = s * c[3 + k];
+            }
+            jc[9] = a;
+            jc[12 + 9] = b;
+            jc[10] = 1.0;
+            jc[12 + 11] = 1.0;
+        }
+    }
+
+    fn cam_basis(&self, cam: &[f64], out: &mut [f64]) -> bool {
+        let d = self.cam_dim();
+        out[..12 * d].fill(0.0);
+        for k in 0..3 {
+            let v = Self::rot_dir(cam, k);
+            for i in 0..9 {
+                out[i * d + k] = v[i];
+            }
+        }
+        let mut col = 3;
+        if self.scaled {
+            out[9 * d + col] = 1.0;
+            col += 1;
+        }
+        out[10 * d + col] = 1.0;
+        out[11 * d + col + 1] = 1.0;
+        true
+    }
+
+    fn normalize_cam(&self, cam: &mut [f64]) {
+        let m = Matrix3::from_row_slice(&cam[..9]);
+        let svd = m.svd(true, true);
+        if let (Some(u), Some(vt)) = (svd.u, svd.v_t) {
+            let mut r = u * vt;
+            if r.determinant() < 0.0 {
+                let mut d = Matrix3::identity();
+                d[(2, 2)] = -1.0;
+                r = u * d * vt;
+            }
+            for i in 0..3 {
+                for j in 0..3 {
+                    cam[3 * i + j] = r[(i, j)];
+                }
+            }
+        }
+    }
+
+    /// The similarity gauge `x ↦ c A x + b`: every direction of camera 0, and for camera 1
+    /// the translation of the world along camera 0's viewing axis `k₀` (which camera 0
+    /// does not see): `t₁ ↦ t₁ − s₁ R₁₂ k₀`.
+    fn gauge_pins(&self, cams: &[f64], n_cams: usize) -> Vec<(usize, Vec<Vec<f64>>)> {
+        if n_cams < 2 {
+            return Vec::new();
+        }
+        let mut all: Vec<Vec<f64>> = (0..3)
+            .map(|k| {
+                let mut v = vec![0.0; 12];
+                v[..9].copy_from_slice(&Self::rot_dir(&cams[..12], k));
+                v
+            })
+            .collect();
+        let unit = |i: usize| (0..12).map(|j| if i == j { 1.0 } else { 0.0 }).collect();
+        if self.scaled {
+            all.push(unit(9));
+        }
+        all.push(unit(10));
+        all.push(unit(11));
+        let k0 = [cams[6], cams[7], cams[8]];
+        let c1 = &cams[12..24];
+        let mut v = vec![0.0; 12];
+        for r in 0..2 {
+            v[10 + r] = c1[9] * (0..3).map(|k| c1[3 * r + k] * k0[k]).sum::<f64>();
+        }
+        vec![(0, all), (1, vec![v])]
+    }
+}
+
+/// A table as the sparse engine's graph, in normalized coordinates `(w − centre) / scale`.
+pub struct SparseProblem {
+    pub graph: Graph,
+    pub centre: [f64; 2],
+    pub scale: f64,
+}
+
+impl SparseProblem {
+    /// The observations of `table`, by track, centred, and scaled to unit RMS spread when
+    /// `normalize_scale` (not for the orthographic camera, whose unit scale is in pixels).
+    /// `O(n_obs)`.
+    pub fn new(table: &TrackTable, normalize_scale: bool) -> Self {
+        let (ptr, obs) = table.by_track();
+        let n = obs.len().max(1) as f64;
+        let (mut cx, mut cy) = (0.0, 0.0);
+        for &(_, x, y) in &obs {
+            cx += x;
+            cy += y;
+        }
+        let centre = [cx / n, cy / n];
+        let mut ss = 0.0;
+        for &(_, x, y) in &obs {
+            ss += (x - centre[0]).powi(2) + (y - centre[1]).powi(2);
+        }
+        let scale = (ss / (2.0 * n)).sqrt();
+        let scale = if normalize_scale && scale > 0.0 && scale.is_finite() {
+            scale
+        } else {
+            1.0
+        };
+        let graph = Graph {
+            n_cams: table.n_frames(),
+            n_pts: table.n_tracks(),
+            pt_ptr: ptr,
+            cam: obs.iter().map(|o| o.0 as usize).collect(),
+            w: obs
+                .iter()
+                .map(|&(_, x, y)| [(x - centre[0]) / scale, (y - centre[1]) / scale])
+                .collect(),
+        };
+        Self {
+            graph,
+            centre,
+            scale,
+        }
+    }
+
+    /// The windowed metric start: cameras (12 per frame, see [`ScaledOrthographic`]) and
+    /// points (3 per track).
+    ///
+    /// Each window of frames is completed (dense damped Wiberg, small), upgraded to metric
+    /// on its own ([`crate::metric::upgrade`]) and mapped into window 0's frame by the
+    /// similarity `X = c A x + b` (reflection allowed: each window has its own depth
+    /// reversal) that best carries its points onto the tracks already placed (Umeyama,
+    /// ≥ 4 shared tracks). A window whose similarity leaves the shared points off by more
+    /// than [`SparseConfig::max_window_mismatch`] of their spread (its completion fell into
+    /// a local minimum, or its motion is too weak for its own metric upgrade) is completed
+    /// again from [`SparseConfig::window_restarts`] random starts; if it still does not fit
+    /// it is skipped (the windows overlap, so the next one places its frames) and counted.
+    ///
+    /// Why metric windows: a chain of affine windows accumulates shear and stretch that no
+    /// global metric upgrade undoes, and mapping windows affinely onto metric points loses
+    /// the depth of thin scenes (start RMS 70 px and 720 px at 300 frames against 1–5 px;
+    /// docs/results.md). Linear in the frames.
+    pub fn start(
+        &self,
+        cfg: &SparseConfig,
+        camera: CameraModel,
+    ) -> Result<(Vec<f64>, Vec<f64>, usize)> {
+        start_windows(&self.graph, cfg, camera)
+    }
+
+    /// Variable-projection adjustment from `(cams, pts)` (updated in place).
+    pub fn adjust(
+        &self,
+        cams: &mut [f64],
+        pts: &mut [f64],
+        cfg: &SparseConfig,
+        camera: CameraModel,
+        run: usize,
+        observer: &mut dyn Observer,
+    ) -> Result<bundle::LmResult> {
+        let mut progress = Progress {
+            observer,
+            name: "sparse-varpro",
+            run,
+            rms_scale: self.scale,
+        };
+        let model = ScaledOrthographic {
+            scaled: camera != CameraModel::Orthographic,
+        };
+        bundle::minimize(&model, &self.graph, cams, pts, &cfg.lm, &mut progress).map_err(
+            |message| Error::Numerical {
+                stage: "sparse variable projection",
+                message,
+            },
+        )
+    }
+
+    /// Per track, the sum of squared residuals (normalized units) and its observations.
+    pub fn track_costs(&self, cams: &[f64], pts: &[f64]) -> Vec<f64> {
+        let g = &self.graph;
+        (0..g.n_pts)
+            .map(|p| {
+                let mut r = [0.0; 2];
+                g.track(p)
+                    .map(|o| {
+                        ScaledOrthographic { scaled: true }.eval(
+                            &cams[12 * g.cam[o]..12 * g.cam[o] + 12],
+                            &pts[3 * p..3 * p + 3],
+                            &[],
+                            g.w[o],
+                            &mut r,
+                            None,
+                        );
+                        r[0] * r[0] + r[1] * r[1]
+                    })
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// Robust standard deviation of one residual scalar, pixels: 1.4826 × the median of
+    /// `|r|` over every observed scalar (selection in `O(n_obs)`).
+    pub fn robust_sigma_px(&self, cams: &[f64], pts: &[f64]) -> f64 {
+        let g = &self.graph;
+        let mut abs = Vec::with_capacity(2 * g.n_obs());
+        let mut r = [0.0; 2];
+        for p in 0..g.n_pts {
+            for o in g.track(p) {
+                ScaledOrthographic { scaled: true }.eval(
+                    &cams[12 * g.cam[o]..12 * g.cam[o] + 12],
+                    &pts[3 * p..3 * p + 3],
+                    &[],
+                    g.w[o],
+                    &mut r,
+                    None,
+                );
+                abs.push(r[0].abs());
+                abs.push(r[1].abs());
+            }
+        }
+        if abs.is_empty() {
+            return 0.0;
+        }
+        let mid = abs.len() / 2;
+        let (_, m, _) = abs.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+        1.4826 * *m * self.scale
+    }
+
+    /// The metric model in pixels: cameras `s R`, `t` scaled back (`s·scale`,
+    /// `t·scale + centre`), points unchanged.
+    pub fn metric_model(&self, cams: &[f64], pts: &[f64]) -> MetricModel {
+        let (nf, np) = (self.graph.n_cams, self.graph.n_pts);
+        MetricModel {
+            rotations: (0..nf)
+                .map(|f| {
+                    Rotation3::from_matrix_unchecked(Matrix3::from_row_slice(
+                        &cams[12 * f..12 * f + 9],
+                    ))
+                })
+                .collect(),
+            scales: (0..nf).map(|f| cams[12 * f + 9] * self.scale).collect(),
+            translations: (0..nf)
+                .map(|f| {
+                    Vector2::new(
+                        cams[12 * f + 10] * self.scale + self.centre[0],
+                        cams[12 * f + 11] * self.scale + self.centre[1],
+                    )
+                })
+                .collect(),
+            points: (0..np)
+                .map(|p| Vector3::new(pts[3 * p], pts[3 * p + 1], pts[3 * p + 2]))
+                .collect(),
+        }
+    }
+
+    /// Re-triangulates every point from its observations given the metric cameras (3×3
+    /// normal equations per track, pixels); points with a singular system keep their value
+    /// and are returned.
+    pub fn triangulate(&self, model: &mut MetricModel) -> Vec<usize> {
+        let g = &self.graph;
+        let mut failed = Vec::new();
+        for p in 0..g.n_pts {
+            let mut ata = Matrix3::<f64>::zeros();
+            let mut atb = Vector3::<f64>::zeros();
+            for o in g.track(p) {
+                let f = g.cam[o];
+                let r = model.rotations[f].matrix();
+                let sc = model.scales[f];
+                for row in 0..2 {
+                    let a = Vector3::new(r[(row, 0)], r[(row, 1)], r[(row, 2)]) * sc;
+                    let b = self.pixel(o)[row] - model.translations[f][row];
+                    ata += a * a.transpose();
+                    atb += a * b;
+                }
+            }
+            let eig = ata.symmetric_eigenvalues();
+            let (lo, hi) = (eig.min(), eig.max());
+            if hi <= 0.0 || lo <= 1e-10 * hi {
+                failed.push(p);
+                continue;
+            }
+            match ata.cholesky() {
+                Some(ch) => model.points[p] = ch.solve(&atb),
+                None => failed.push(p),
+            }
+        }
+        failed
+    }
+
+    /// Observation `o` in pixels.
+    #[inline]
+    pub fn pixel(&self, o: usize) -> Vector2<f64> {
+        let w = self.graph.w[o];
+        Vector2::new(
+            w[0] * self.scale + self.centre[0],
+            w[1] * self.scale + self.centre[1],
+        )
+    }
+
+    /// Per frame and per track, `(Σ r², #observations)` of a metric model, pixels.
+    pub fn residuals(&self, model: &MetricModel) -> (Vec<SumSq>, Vec<SumSq>) {
+        let g = &self.graph;
+        let mut frames = vec![(0.0, 0usize); g.n_cams];
+        let mut tracks = vec![(0.0, 0usize); g.n_pts];
+        for (p, tr) in tracks.iter_mut().enumerate() {
+            for o in g.track(p) {
+                let f = g.cam[o];
+                let d = model.project(f, p) - self.pixel(o);
+                let ss = d.norm_squared();
+                frames[f].0 += ss;
+                frames[f].1 += 1;
+                tr.0 += ss;
+                tr.1 += 1;
+            }
+        }
+        (frames, tracks)
+    }
+}
+
+/// One window's metric reconstruction: per local frame `(R, s, t)`, per track its point.
+struct MetricWindow {
+    cameras: Vec<(Rotation3<f64>, f64, [f64; 2])>,
+    points: Vec<Vector3<f64>>,
+    /// The window's affine completion.
+    affine: crate::completion::Completion,
+}
+
+/// The chained-window start of [`SparseProblem::start`] on a graph (see there).
+fn start_windows(
+    g: &Graph,
+    cfg: &SparseConfig,
+    camera: CameraModel,
+) -> Result<(Vec<f64>, Vec<f64>, usize)> {
+    let (nf, np) = (g.n_cams, g.n_pts);
+    let mut cams = vec![f64::NAN; 12 * nf];
+    let mut cam_done = vec![false; nf];
+    let mut pts = vec![0.0; 3 * np];
+    let mut placed = vec![false; np];
+    let mut first = true;
+    let mut skipped = 0;
+    // The windows' completions and metric upgrades are independent: computed in
+    // parallel (memory: every window's dense measurements, O(n_obs · window)), then
+    // chained in order.
+    let mut windows = Vec::new();
+    windowed::for_each_window(g, &cfg.window, |start, end, tracks, meas| {
+        windows.push((start, end, tracks.to_vec(), meas.clone()));
+        Ok(())
+    })?;
+    let fitted: Vec<Result<MetricWindow>> = windows
+        .par_iter()
+        .map(|(start, end, tracks, meas)| {
+            metric_window(*start, *end, tracks, meas, &cfg.window, camera)
+        })
+        .collect();
+    for ((start, end, tracks, meas), window) in windows.iter().zip(fitted) {
+        let (start, end, tracks) = (*start, *end, tracks.as_slice());
+        let mut window = match window {
+            Ok(w) => w,
+            Err(e) if first => return Err(e),
+            Err(_) => {
+                skipped += 1;
+                continue;
+            }
+        };
+        // X_glob = sc · A x + b.
+        let mut map = (1.0, Matrix3::identity(), Vector3::zeros());
+        if !first {
+            let shared: Vec<usize> = (0..tracks.len()).filter(|&k| placed[tracks[k]]).collect();
+            if shared.len() < 4 {
+                skipped += 1;
+                affine_bridge(
+                    start,
+                    tracks,
+                    &window.affine,
+                    camera,
+                    &mut cams,
+                    &mut cam_done,
+                    &mut pts,
+                    &mut placed,
+                );
+                continue;
+            }
+            let glob: Vec<_> = shared
+                .iter()
+                .map(|&k| {
+                    let p = tracks[k];
+                    Vector3::new(pts[3 * p], pts[3 * p + 1], pts[3 * p + 2])
+                })
+                .collect();
+            let align = |w: &MetricWindow| {
+                let est: Vec<_> = shared.iter().map(|&k| w.points[k]).collect();
+                crate::eval::align_similarity(&est, &glob, true)
+            };
+            let mut al = align(&window);
+            if al
+                .as_ref()
+                .is_none_or(|a| !(a.relative_rms <= cfg.max_window_mismatch))
+                && cfg.window_restarts > 0
+            {
+                let mut wc = cfg.window.clone();
+                wc.completion.runs = 1 + cfg.window_restarts;
+                wc.completion.seed = start as u64;
+                if let Ok(w2) = metric_window(start, end, tracks, meas, &wc, camera) {
+                    let al2 = align(&w2);
+                    let better = match (&al, &al2) {
+                        (_, None) => false,
+                        (None, Some(_)) => true,
+                        (Some(a), Some(b)) => b.relative_rms < a.relative_rms,
+                    };
+                    if better {
+                        window = w2;
+                        al = al2;
+                    }
+                }
+            }
+            match al {
+                Some(a) if a.relative_rms <= cfg.max_window_mismatch => {
+                    map = (a.scale, a.rotation, a.translation);
+                }
+                _ => {
+                    skipped += 1;
+                    affine_bridge(
+                        start,
+                        tracks,
+                        &window.affine,
+                        camera,
+                        &mut cams,
+                        &mut cam_done,
+                        &mut pts,
+                        &mut placed,
+                    );
+                    continue;
+                }
+            }
+        }
+        let (sc, a, b) = map;
+        for f in start..end {
+            if cam_done[f] {
+                continue;
+            }
+            let (rot, s, t) = &window.cameras[f - start];
+            // s R₁₂ x + t = (s / sc) (A R₁₂ᵀ)ᵀ (X_glob − b) + t.
+            let rm = rot.matrix();
+            let i = a * Vector3::new(rm[(0, 0)], rm[(0, 1)], rm[(0, 2)]);
+            let j = a * Vector3::new(rm[(1, 0)], rm[(1, 1)], rm[(1, 2)]);
+            let k = i.cross(&j);
+            let sg = s / sc;
+            let cam = &mut cams[12 * f..12 * f + 12];
+            for (r, v) in [i, j, k].iter().enumerate() {
+                cam[3 * r..3 * r + 3].copy_from_slice(&[v[0], v[1], v[2]]);
+            }
+            cam[9] = if camera == CameraModel::Orthographic {
+                1.0
+            } else {
+                sg
+            };
+            cam[10] = t[0] - sg * i.dot(&b);
+            cam[11] = t[1] - sg * j.dot(&b);
+            cam_done[f] = true;
+        }
+        for (k, &p) in tracks.iter().enumerate() {
+            if !placed[p] {
+                let x = a * window.points[k] * sc + b;
+                pts[3 * p..3 * p + 3].copy_from_slice(&[x[0], x[1], x[2]]);
+                placed[p] = true;
+            }
+        }
+        first = false;
+    }
+    if let Some(f) = cam_done.iter().position(|d| !d) {
+        return Err(Error::Degenerate(format!(
+            "frame {f}: no window of frames around it could be reconstructed \
+             ({skipped} window(s) skipped)"
+        )));
+    }
+    Ok((cams, pts, skipped))
+}
+
+/// A window whose own metric reconstruction does not fit the points already placed
+/// (typically its motion is too weak to fix depth on its own) is mapped by the affine map
+/// `X = A x + b` that carries its *affine* points onto the placed ones (linear least
+/// squares over ≥ 4 shared tracks; the map absorbs the window's affine ambiguity, so its
+/// frames take the metric frame of their neighbours): its new frames' cameras become the
+/// nearest scaled rotations of `A⁻ᵀ m`, its new tracks `A x + b`. Returns false when the
+/// shared tracks are too few or coplanar.
+#[allow(clippy::too_many_arguments)]
+fn affine_bridge(
+    start: usize,
+    tracks: &[usize],
+    c: &crate::completion::Completion,
+    camera: CameraModel,
+    cams: &mut [f64],
+    cam_done: &mut [bool],
+    pts: &mut [f64],
+    placed: &mut [bool],
+) -> bool {
+    let shared: Vec<usize> = (0..tracks.len()).filter(|&k| placed[tracks[k]]).collect();
+    if shared.len() < 4 {
+        return false;
+    }
+    let mut ata = Matrix4::<f64>::zeros();
+    let mut aty = [Vector4::<f64>::zeros(); 3];
+    for &k in &shared {
+        let x = Vector4::new(c.s[(0, k)], c.s[(1, k)], c.s[(2, k)], 1.0);
+        ata += x * x.transpose();
+        let p = tracks[k];
+        for r in 0..3 {
+            aty[r] += x * pts[3 * p + r];
+        }
+    }
+    let Some(ch) = ata.cholesky() else {
+        return false;
+    };
+    let mut a = Matrix3::zeros();
+    let mut b = Vector3::zeros();
+    for r in 0..3 {
+        let sol = ch.solve(&aty[r]);
+        for k in 0..3 {
+            a[(r, k)] = sol[k];
+        }
+        b[r] = sol[3];
+    }
+    let Some(ainv) = a.try_inverse() else {
+        return false;
+    };
+    let nw = c.m.nrows() / 2;
+    for lf in 0..nw {
+        let f = start + lf;
+        if cam_done[f] {
+            continue;
+        }
+        // m·x + t = (A⁻ᵀ m)·(X − b) + t.
+        let row = |r: usize| ainv.transpose() * Vector3::new(c.m[(r, 0)], c.m[(r, 1)], c.m[(r, 2)]);
+        let (mi, mj) = (row(2 * lf), row(2 * lf + 1));
+        let Some((rot, s)) = crate::metric::nearest_camera(&mi, &mj) else {
+            continue;
+        };
+        let s = if camera == CameraModel::Orthographic {
+            1.0
+        } else {
+            s
+        };
+        let rm = rot.matrix();
+        let cam = &mut cams[12 * f..12 * f + 12];
+        for i in 0..3 {
+            for j in 0..3 {
+                cam[3 * i + j] = rm[(i, j)];
+            }
+        }
+        cam[9] = s;
+        cam[10] = c.t[2 * lf] - mi.dot(&b);
+        cam[11] = c.t[2 * lf + 1] - mj.dot(&b);
+        cam_done[f] = true;
+    }
+    for (k, &p) in tracks.iter().enumerate() {
+        if !placed[p] {
+            let x = a * Vector3::new(c.s[(0, k)], c.s[(1, k)], c.s[(2, k)]) + b;
+            pts[3 * p..3 * p + 3].copy_from_slice(&[x[0], x[1], x[2]]);
+            placed[p] = true;
+        }
+    }
+    true
+}
+
+/// Completes a window and upgrades it to metric on its own.
+fn metric_window(
+    start: usize,
+    end: usize,
+    tracks: &[usize],
+    meas: &crate::Measurements,
+    cfg: &WindowConfig,
+    camera: CameraModel,
+) -> Result<MetricWindow> {
+    let c = windowed::complete_window(start, end, tracks, meas, cfg)?;
+    let up = crate::metric::upgrade(
+        c.m.as_ref(),
+        camera,
+        &crate::metric::MetricConfig::default(),
+    )
+    .map_err(|e| {
+        Error::Degenerate(format!(
+            "window of frames {start}..{end}: metric upgrade failed: {e}"
+        ))
+    })?;
+    let qinv = up.q.try_inverse().ok_or_else(|| {
+        Error::Degenerate(format!("window of frames {start}..{end}: Q is singular"))
+    })?;
+    let cameras = (0..end - start)
+        .map(|lf| {
+            let row =
+                |r: usize| up.q.transpose() * Vector3::new(c.m[(r, 0)], c.m[(r, 1)], c.m[(r, 2)]);
+            let (rot, s) = crate::metric::nearest_camera(&row(2 * lf), &row(2 * lf + 1))
+                .ok_or_else(|| {
+                    Error::Degenerate(format!(
+                        "frame {}: the metric camera rows are linearly dependent",
+                        start + lf
+                    ))
+                })?;
+            Ok((rot, s, [c.t[2 * lf], c.t[2 * lf + 1]]))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let points = (0..tracks.len())
+        .map(|k| qinv * Vector3::new(c.s[(0, k)], c.s[(1, k)], c.s[(2, k)]))
+        .collect();
+    Ok(MetricWindow {
+        cameras,
+        points,
+        affine: c,
+    })
+}
+
+/// A sum of squared residuals (pixels²) and the number of observations in it.
+pub type SumSq = (f64, usize);
+
+/// The result of [`fit`]: the affine fit (normalized units) and which tracks it kept.
+pub struct SparseFit {
+    pub cams: Vec<f64>,
+    pub pts: Vec<f64>,
+    /// Per track of the table: kept (true) or rejected as an outlier.
+    pub inlier: Vec<bool>,
+    pub report: SolverReport,
+    pub rms_px: f64,
+    pub sigma_px: f64,
+    pub threshold_px: f64,
+    pub schur_nonzeros: usize,
+    pub rounds: usize,
+    /// Windows of the start that did not fit and were skipped.
+    pub skipped_windows: usize,
+    /// Why the outlier rejection did not run, when it did not.
+    pub note: Option<String>,
+}
+
+/// Start, adjust, reject outlier tracks, adjust again (see the module documentation).
+/// `table` must be connected with every frame seeing ≥ 4 tracks and every track ≥ 2 frames
+/// (what [`TrackTable::set_aside`] leaves). Returns the fit on `table`'s tracks (outliers
+/// included, with their points from the first round).
+pub fn fit(
+    table: &TrackTable,
+    cfg: &SparseConfig,
+    camera: CameraModel,
+    observer: &mut dyn Observer,
+) -> Result<(SparseProblem, SparseFit)> {
+    let prob = SparseProblem::new(table, camera != CameraModel::Orthographic);
+    let (mut cams, mut pts, skipped_windows) = prob.start(cfg, camera)?;
+    let lm = prob.adjust(&mut cams, &mut pts, cfg, camera, 0, observer)?;
+    let n_res = (2 * prob.graph.n_obs()).max(1) as f64;
+    let scale = prob.scale;
+    let rms = |c: f64| (c / n_res).sqrt() * scale;
+    let sigma = prob.robust_sigma_px(&cams, &pts);
+    let threshold = (cfg.outlier_sigmas * sigma).max(cfg.min_outlier_px);
+    let costs = prob.track_costs(&cams, &pts);
+    let mut inlier: Vec<bool> = (0..prob.graph.n_pts)
+        .map(|p| {
+            let k = prob.graph.track(p).len().max(1) as f64;
+            (costs[p] / (2.0 * k)).sqrt() * prob.scale <= threshold
+        })
+        .collect();
+    let mut n_out = inlier.iter().filter(|&&b| !b).count();
+    let keep: Vec<usize> = (0..prob.graph.n_pts).filter(|&p| inlier[p]).collect();
+    let all_frames: Vec<usize> = (0..table.n_frames()).collect();
+    let sub = table.select(&all_frames, &keep);
+    // Residuals judge tracks only at an optimum; and a rejection that starves a frame
+    // would lose it. Either way every track is kept and the report says why.
+    let mut note = None;
+    if n_out > 0 && lm.report.status != crate::SolverStatus::Converged {
+        note = Some(format!(
+            "no outlier rejection: the adjustment ended with status {:?} ({n_out} track(s) \
+             over {threshold:.2} px would have been rejected)",
+            lm.report.status
+        ));
+    } else if n_out > 0 && (0..sub.n_frames()).any(|f| sub.frame_len(f) < 4) {
+        note = Some(format!(
+            "no outlier rejection: rejecting the {n_out} track(s) over {threshold:.2} px \
+             would leave a frame with fewer than 4 tracks"
+        ));
+    }
+    if note.is_some() {
+        inlier.iter_mut().for_each(|b| *b = true);
+        n_out = 0;
+    }
+    if n_out == 0 {
+        return Ok((
+            prob,
+            SparseFit {
+                cams,
+                pts,
+                inlier,
+                rms_px: rms(lm.report.final_cost),
+                report: lm.report,
+                sigma_px: sigma,
+                threshold_px: threshold,
+                schur_nonzeros: lm.schur_nnz,
+                rounds: 1,
+                skipped_windows,
+                note,
+            },
+        ));
+    }
+    // Second round without the outlier tracks, from the current cameras.
+    let mut prob2 = SparseProblem::new(&sub, camera != CameraModel::Orthographic);
+    // Keep the first round's normalization so the cameras carry over.
+    prob2.graph.w = prob2
+        .graph
+        .w
+        .iter()
+        .map(|w| {
+            let px = [
+                w[0] * prob2.scale + prob2.centre[0],
+                w[1] * prob2.scale + prob2.centre[1],
+            ];
+            [
+                (px[0] - prob.centre[0]) / prob.scale,
+                (px[1] - prob.centre[1]) / prob.scale,
+            ]
+        })
+        .collect();
+    prob2.centre = prob.centre;
+    prob2.scale = prob.scale;
+    let mut pts2: Vec<f64> = keep
+        .iter()
+        .flat_map(|&p| pts[3 * p..3 * p + 3].to_vec())
+        .collect();
+    let lm2 = prob2.adjust(&mut cams, &mut pts2, cfg, camera, 1, observer)?;
+    for (k, &p) in keep.iter().enumerate() {
+        pts[3 * p..3 * p + 3].copy_from_slice(&pts2[3 * k..3 * k + 3]);
+    }
+    let n_res2 = (2 * prob2.graph.n_obs()).max(1) as f64;
+    Ok((
+        prob,
+        SparseFit {
+            cams,
+            pts,
+            inlier,
+            rms_px: (lm2.report.final_cost / n_res2).sqrt() * prob2.scale,
+            report: lm2.report,
+            sigma_px: sigma,
+            threshold_px: threshold,
+            schur_nonzeros: lm2.schur_nnz,
+            rounds: 2,
+            skipped_windows,
+            note: None,
+        },
+    ))
+}
