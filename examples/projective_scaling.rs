@@ -22,6 +22,9 @@ use rand_distr::{Distribution, Normal};
 use rank3::projective::windowed::WindowConfig;
 use rank3::projective::{Observation, ProjectiveConfig, fit_observations};
 
+mod common;
+use common::peak_rss_mb;
+
 /// Frame f's camera: K [R | −R c], moving along +x at 0.25 units per frame, looking +z
 /// with a slow yaw/pitch wobble.
 fn camera(f: usize) -> (Matrix3<f64>, Rotation3<f64>, Vector3<f64>) {
@@ -121,17 +124,6 @@ impl rank3::Observer for Printer {
             eprintln!("{solver} {iteration} rms {rms:.6} lambda {lambda:.3e}");
         }
     }
-}
-
-fn peak_rss_mb() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        })
-        .map_or(f64::NAN, |kb| kb / 1024.0)
 }
 
 /// The configuration of a run: the defaults, with `--max-iterations N` capping the bundle

@@ -22,16 +22,8 @@ use rank3::sparse::Pipeline;
 use rank3::synth::{CorridorConfig, corridor};
 use rank3::{Config, Reconstruction};
 
-fn peak_rss_mb() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        })
-        .map_or(f64::NAN, |kb| kb / 1024.0)
-}
+mod common;
+use common::peak_rss_mb;
 
 /// Structure error (RMS distance after the best similarity, reflection allowed, over the
 /// RMS spread) of a reconstruction's kept tracks against the truth.

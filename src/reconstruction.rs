@@ -1093,19 +1093,7 @@ impl Reconstruction {
             ..
         } = fitted;
         set_aside.extend(aside2);
-        if !set_aside.is_empty() {
-            warnings.push(format!(
-                "{} track(s) and {} frame(s) set aside (see `set_aside`)",
-                set_aside
-                    .iter()
-                    .filter(|s| s.kind == crate::tracks::SetAsideKind::Track)
-                    .count(),
-                set_aside
-                    .iter()
-                    .filter(|s| s.kind == crate::tracks::SetAsideKind::Frame)
-                    .count()
-            ));
-        }
+        warnings.extend(set_aside_warning(&set_aside));
         warnings.extend(fit_warnings);
         let affine_prediction = Mat::from_fn(affine.m_hat.nrows(), affine.s_hat.ncols(), |r, p| {
             let mut v = affine.t[r];
@@ -1850,6 +1838,18 @@ fn check_size(t: &TrackTable) -> Result<()> {
     Ok(())
 }
 
+/// The warning that tracks or frames were set aside, if any were.
+fn set_aside_warning(set_aside: &[SetAside]) -> Option<String> {
+    let count = |kind| set_aside.iter().filter(|s| s.kind == kind).count();
+    (!set_aside.is_empty()).then(|| {
+        format!(
+            "{} track(s) and {} frame(s) set aside (see `set_aside`)",
+            count(crate::tracks::SetAsideKind::Track),
+            count(crate::tracks::SetAsideKind::Frame)
+        )
+    })
+}
+
 fn rms_of(ss: f64, n_pairs: usize) -> f64 {
     if n_pairs > 0 {
         (ss / (2 * n_pairs) as f64).sqrt()
@@ -2346,19 +2346,7 @@ fn sparse_reconstruction(
             fit.threshold_px
         ));
     }
-    if !set_aside.is_empty() {
-        warnings.push(format!(
-            "{} track(s) and {} frame(s) set aside (see `set_aside`)",
-            set_aside
-                .iter()
-                .filter(|s| s.kind == crate::tracks::SetAsideKind::Track)
-                .count(),
-            set_aside
-                .iter()
-                .filter(|s| s.kind == crate::tracks::SetAsideKind::Frame)
-                .count()
-        ));
-    }
+    warnings.extend(set_aside_warning(&set_aside));
     set_aside.shrink_to_fit();
     for w in &warnings {
         timer.observer.on_event(&Event::Warning { message: w });

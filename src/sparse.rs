@@ -59,7 +59,7 @@
 //! * S. Umeyama, "Least-squares estimation of transformation parameters between two point
 //!   patterns", PAMI 13(4), 1991 (the windows' similarities).
 
-use nalgebra::{Matrix3, Matrix4, Rotation3, Vector2, Vector3, Vector4};
+use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -397,22 +397,30 @@ impl SparseProblem {
         )
     }
 
-    /// Per track, the sum of squared residuals (normalized units) and its observations.
-    pub fn track_costs(&self, cams: &[f64], pts: &[f64]) -> Vec<f64> {
+    /// The residual of observation `o` (of track `p`), normalized units.
+    #[inline]
+    fn residual(&self, cams: &[f64], pts: &[f64], p: usize, o: usize) -> [f64; 2] {
         let g = &self.graph;
-        (0..g.n_pts)
+        let mut r = [0.0; 2];
+        ScaledOrthographic { scaled: true }.eval(
+            &cams[12 * g.cam[o]..12 * g.cam[o] + 12],
+            &pts[3 * p..3 * p + 3],
+            &[],
+            g.w[o],
+            &mut r,
+            None,
+        );
+        r
+    }
+
+    /// Per track, the sum of squared residuals (normalized units).
+    pub fn track_costs(&self, cams: &[f64], pts: &[f64]) -> Vec<f64> {
+        (0..self.graph.n_pts)
             .map(|p| {
-                let mut r = [0.0; 2];
-                g.track(p)
+                self.graph
+                    .track(p)
                     .map(|o| {
-                        ScaledOrthographic { scaled: true }.eval(
-                            &cams[12 * g.cam[o]..12 * g.cam[o] + 12],
-                            &pts[3 * p..3 * p + 3],
-                            &[],
-                            g.w[o],
-                            &mut r,
-                            None,
-                        );
+                        let r = self.residual(cams, pts, p, o);
                         r[0] * r[0] + r[1] * r[1]
                     })
                     .sum()
@@ -425,17 +433,9 @@ impl SparseProblem {
     pub fn robust_sigma_px(&self, cams: &[f64], pts: &[f64]) -> f64 {
         let g = &self.graph;
         let mut abs = Vec::with_capacity(2 * g.n_obs());
-        let mut r = [0.0; 2];
         for p in 0..g.n_pts {
             for o in g.track(p) {
-                ScaledOrthographic { scaled: true }.eval(
-                    &cams[12 * g.cam[o]..12 * g.cam[o] + 12],
-                    &pts[3 * p..3 * p + 3],
-                    &[],
-                    g.w[o],
-                    &mut r,
-                    None,
-                );
+                let r = self.residual(cams, pts, p, o);
                 abs.push(r[0].abs());
                 abs.push(r[1].abs());
             }
@@ -584,23 +584,14 @@ fn start_windows(
                 continue;
             }
         };
-        // X_glob = sc · A x + b.
-        let mut map = (1.0, Matrix3::identity(), Vector3::zeros());
-        if !first {
+        // X_glob = sc · A x + b; None: the window does not fit and is bridged.
+        let map = 'map: {
+            if first {
+                break 'map Some((1.0, Matrix3::identity(), Vector3::zeros()));
+            }
             let shared: Vec<usize> = (0..tracks.len()).filter(|&k| placed[tracks[k]]).collect();
             if shared.len() < 4 {
-                skipped += 1;
-                affine_bridge(
-                    start,
-                    tracks,
-                    &window.affine,
-                    camera,
-                    &mut cams,
-                    &mut cam_done,
-                    &mut pts,
-                    &mut placed,
-                );
-                continue;
+                break 'map None;
             }
             let glob: Vec<_> = shared
                 .iter()
@@ -635,26 +626,23 @@ fn start_windows(
                     }
                 }
             }
-            match al {
-                Some(a) if a.relative_rms <= cfg.max_window_mismatch => {
-                    map = (a.scale, a.rotation, a.translation);
-                }
-                _ => {
-                    skipped += 1;
-                    affine_bridge(
-                        start,
-                        tracks,
-                        &window.affine,
-                        camera,
-                        &mut cams,
-                        &mut cam_done,
-                        &mut pts,
-                        &mut placed,
-                    );
-                    continue;
-                }
-            }
-        }
+            al.filter(|a| a.relative_rms <= cfg.max_window_mismatch)
+                .map(|a| (a.scale, a.rotation, a.translation))
+        };
+        let Some(map) = map else {
+            skipped += 1;
+            affine_bridge(
+                start,
+                tracks,
+                &window.affine,
+                camera,
+                &mut cams,
+                &mut cam_done,
+                &mut pts,
+                &mut placed,
+            );
+            continue;
+        };
         let (sc, a, b) = map;
         for f in start..end {
             if cam_done[f] {
@@ -720,28 +708,16 @@ fn affine_bridge(
     if shared.len() < 4 {
         return false;
     }
-    let mut ata = Matrix4::<f64>::zeros();
-    let mut aty = [Vector4::<f64>::zeros(); 3];
-    for &k in &shared {
-        let x = Vector4::new(c.s[(0, k)], c.s[(1, k)], c.s[(2, k)], 1.0);
-        ata += x * x.transpose();
+    let pairs = shared.iter().map(|&k| {
         let p = tracks[k];
-        for r in 0..3 {
-            aty[r] += x * pts[3 * p + r];
-        }
-    }
-    let Some(ch) = ata.cholesky() else {
+        (
+            Vector3::new(c.s[(0, k)], c.s[(1, k)], c.s[(2, k)]),
+            Vector3::new(pts[3 * p], pts[3 * p + 1], pts[3 * p + 2]),
+        )
+    });
+    let Some((a, b)) = windowed::fit_affine_map(pairs) else {
         return false;
     };
-    let mut a = Matrix3::zeros();
-    let mut b = Vector3::zeros();
-    for r in 0..3 {
-        let sol = ch.solve(&aty[r]);
-        for k in 0..3 {
-            a[(r, k)] = sol[k];
-        }
-        b[r] = sol[3];
-    }
     let Some(ainv) = a.try_inverse() else {
         return false;
     };

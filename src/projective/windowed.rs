@@ -90,32 +90,19 @@ pub fn affine_start(g: &Graph, cfg: &WindowConfig) -> Result<(Vec<f64>, Vec<f64>
             if shared.len() < 4 {
                 return Err(too_few_shared(start, end, shared.len(), 4));
             }
-            // Per output coordinate r: minimise Σ (A_r·x + b_r − y_r)² over the shared tracks.
-            let mut ata = Matrix4::<f64>::zeros();
-            let mut aty = [Vector4::<f64>::zeros(); 3];
-            for &k in &shared {
-                let x = Vector4::new(c.s[(0, k)], c.s[(1, k)], c.s[(2, k)], 1.0);
-                ata += x * x.transpose();
+            let pairs = shared.iter().map(|&k| {
                 let p = tracks[k];
-                for r in 0..3 {
-                    aty[r] += x * pts[3 * p + r];
-                }
-            }
-            let ch = ata.cholesky().ok_or_else(|| {
+                (
+                    Vector3::new(c.s[(0, k)], c.s[(1, k)], c.s[(2, k)]),
+                    Vector3::new(pts[3 * p], pts[3 * p + 1], pts[3 * p + 2]),
+                )
+            });
+            let (a, b) = fit_affine_map(pairs).ok_or_else(|| {
                 Error::Degenerate(format!(
                     "frames {start}..{end}: the tracks shared with earlier frames are coplanar; \
                      the windows cannot be chained"
                 ))
             })?;
-            let mut a = Matrix3::zeros();
-            let mut b = Vector3::zeros();
-            for r in 0..3 {
-                let sol = ch.solve(&aty[r]);
-                for k in 0..3 {
-                    a[(r, k)] = sol[k];
-                }
-                b[r] = sol[3];
-            }
             (a, b)
         };
         let ainv = a.try_inverse().ok_or_else(|| {
@@ -351,6 +338,34 @@ fn local_refine(
         pts[4 * p..4 * p + 4].copy_from_slice(&x[4 * k..4 * k + 4]);
     }
     Ok(())
+}
+
+/// The affine map `y ≈ A x + b` that best carries the points `x` onto `y` (linear least
+/// squares, per output coordinate over the 4×4 normal matrix of `(x, 1)`); `None` when the
+/// `x` are coplanar (or fewer than 4). `O(n)`.
+pub(crate) fn fit_affine_map(
+    pairs: impl Iterator<Item = (Vector3<f64>, Vector3<f64>)>,
+) -> Option<(Matrix3<f64>, Vector3<f64>)> {
+    let mut ata = Matrix4::<f64>::zeros();
+    let mut aty = [Vector4::<f64>::zeros(); 3];
+    for (x, y) in pairs {
+        let h = Vector4::new(x[0], x[1], x[2], 1.0);
+        ata += h * h.transpose();
+        for r in 0..3 {
+            aty[r] += h * y[r];
+        }
+    }
+    let ch = ata.cholesky()?;
+    let mut a = Matrix3::zeros();
+    let mut b = Vector3::zeros();
+    for r in 0..3 {
+        let sol = ch.solve(&aty[r]);
+        for k in 0..3 {
+            a[(r, k)] = sol[k];
+        }
+        b[r] = sol[3];
+    }
+    Some((a, b))
 }
 
 pub(crate) fn too_few_shared(start: usize, end: usize, have: usize, need: usize) -> Error {
