@@ -47,7 +47,7 @@ __version__ = _rank3.__version__
 def default_settings(kind: str = "reconstruct") -> dict:
     """The library's default settings, as nested dicts: ``"reconstruct"`` (every field of
     ``rank3::Config``: the sections ``svd``, ``metric``, ``robust``, ``completion``,
-    ``refine``, ``projective``, ``perspective`` and the top-level values) or ``"track"``
+    ``refine``, ``projective``, ``perspective``, ``sparse`` and the top-level values) or ``"track"``
     (``rank3::track::TrackerConfig``: ``detect``, ``klt`` and the re-detection values).
     Any of them can be overridden by keyword argument (see :func:`reconstruct`)."""
     return json.loads(_rank3.default_settings(kind))
@@ -253,7 +253,7 @@ class Reconstruction:
         return f"Reconstruction({self.camera_model}, {f} frames, {n} inlier points, RMS {self.rms_px:.4f} px)"
 
 
-_SECTIONS = ("svd", "metric", "completion", "projective", "perspective")
+_SECTIONS = ("svd", "metric", "completion", "projective", "perspective", "sparse")
 
 
 def reconstruct(
@@ -272,6 +272,7 @@ def reconstruct(
     completion: Optional[dict] = None,
     projective: Optional[dict] = None,
     perspective: Optional[dict] = None,
+    sparse: Optional[dict] = None,
     focal: Optional[float] = None,
     principal_point: Optional[Sequence[float]] = None,
     image_size: Optional[Sequence[int]] = None,
@@ -295,8 +296,10 @@ def reconstruct(
       fields of ``robust`` (e.g. ``{"min_track_threshold_px": 3.0}``); ``refine`` likewise.
     * ``seed``, ``min_frames_per_track``, ``min_points_per_frame``, ``rank3_warning_ratio``,
       ``rank2_warning_ratio``: the top-level values.
-    * ``svd``, ``metric``, ``completion``, ``projective``, ``perspective``: dicts overriding
-      fields of those sections, e.g. ``completion={"solver": "als", "runs": 4}``.
+    * ``svd``, ``metric``, ``completion``, ``projective``, ``perspective``, ``sparse``: dicts
+      overriding fields of those sections, e.g. ``completion={"solver": "als", "runs": 4}``
+      or ``sparse={"pipeline": "sparse"}`` (the sparse pipeline for long videos:
+      ``"auto"``, ``"dense"`` or ``"sparse"``; docs/math.md §13).
     * ``focal``, ``principal_point``, ``image_size``: known intrinsics of the perspective
       camera (shortcuts for ``perspective={"intrinsics": {...}}``).
 
@@ -321,7 +324,7 @@ def reconstruct(
             over[name] = value
         elif value is not True:
             raise ConfigError(f"{name} must be True, False or a dict, got {value!r}")
-    for name, value in zip(_SECTIONS, (svd, metric, completion, projective, perspective)):
+    for name, value in zip(_SECTIONS, (svd, metric, completion, projective, perspective, sparse)):
         if value is not None:
             over[name] = dict(value)
     intr = {}

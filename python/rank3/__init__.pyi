@@ -125,6 +125,7 @@ def reconstruct(
     completion: Optional[dict] = ...,
     projective: Optional[dict] = ...,
     perspective: Optional[dict] = ...,
+    sparse: Optional[dict] = ...,
     focal: Optional[float] = ...,
     principal_point: Optional[Sequence[float]] = ...,
     image_size: Optional[Sequence[int]] = ...,

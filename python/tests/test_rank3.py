@@ -135,7 +135,7 @@ def test_errors_carry_file_line_and_field(tmp_path):
 
 def test_settings_reach_every_config_field():
     d = rank3.default_settings()
-    for section in ("svd", "metric", "robust", "completion", "refine", "projective", "perspective"):
+    for section in ("svd", "metric", "robust", "completion", "refine", "projective", "perspective", "sparse"):
         assert isinstance(d[section], dict)
     rec = rank3.reconstruct(
         scene(missing=0.2), camera="orthographic", robust=False, refine=False,
@@ -144,6 +144,10 @@ def test_settings_reach_every_config_field():
     assert rec.report["robust"] is None and rec.report["refinement"] is None
     assert rec.report["completion"]["solver"] == "als"
     assert "klt" in rank3.default_settings("track")
+    # The sparse pipeline, asked for: its report is in the result.
+    rec = rank3.reconstruct(scene(missing=0.2), camera="scaled-orthographic", sparse={"pipeline": "sparse"})
+    assert rec.report["sparse"]["status"] == "converged"
+    assert rec.report["factorization"]["method"] == "sparse-varpro"
 
 
 def test_results_equal_the_command_line(tmp_path):
