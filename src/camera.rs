@@ -151,30 +151,47 @@ impl MetricModel {
         let mut ata = vec![Matrix3::<f64>::zeros(); n];
         let mut atb = vec![Vector3::<f64>::zeros(); n];
         for (f, p) in meas.observed_pairs() {
-            let r = self.rotations[f].matrix();
-            let s = self.scales[f];
-            for row in 0..2 {
-                let a = Vector3::new(r[(row, 0)], r[(row, 1)], r[(row, 2)]) * s;
-                let b = meas.w[(2 * f + row, p)] - self.translations[f][row];
-                ata[p] += a * a.transpose();
-                atb[p] += a * b;
-            }
+            let w = [meas.w[(2 * f, p)], meas.w[(2 * f + 1, p)]];
+            self.accumulate(f, w, &mut ata[p], &mut atb[p]);
         }
         let mut failed = Vec::new();
         for p in 0..n {
-            let m = ata[p];
-            // Reject near-singular systems relative to their own scale.
-            let eig = m.symmetric_eigenvalues();
-            let (lo, hi) = (eig.min(), eig.max());
-            if hi <= 0.0 || lo <= 1e-10 * hi {
-                failed.push(p);
-                continue;
-            }
-            match m.cholesky() {
-                Some(ch) => self.points[p] = ch.solve(&atb[p]),
+            match solve_point(&ata[p], &atb[p]) {
+                Some(x) => self.points[p] = x,
                 None => failed.push(p),
             }
         }
         failed
     }
+
+    /// Adds frame `f`'s observation `w` of a point to its triangulation normal equations
+    /// `Σ aaᵀ x = Σ a b` (`a = s R[row]`, `b = w[row] − t[row]`).
+    #[inline]
+    pub fn accumulate(
+        &self,
+        f: usize,
+        w: [f64; 2],
+        ata: &mut Matrix3<f64>,
+        atb: &mut Vector3<f64>,
+    ) {
+        let r = self.rotations[f].matrix();
+        let s = self.scales[f];
+        for row in 0..2 {
+            let a = Vector3::new(r[(row, 0)], r[(row, 1)], r[(row, 2)]) * s;
+            *ata += a * a.transpose();
+            *atb += a * (w[row] - self.translations[f][row]);
+        }
+    }
+}
+
+/// The point of triangulation normal equations `ata x = atb`, or `None` when `ata` is
+/// near-singular relative to its own scale (smallest eigenvalue ≤ 1e-10 × the largest: the
+/// point is seen from a single viewing direction).
+pub fn solve_point(ata: &Matrix3<f64>, atb: &Vector3<f64>) -> Option<Vector3<f64>> {
+    let eig = ata.symmetric_eigenvalues();
+    let (lo, hi) = (eig.min(), eig.max());
+    if hi <= 0.0 || lo <= 1e-10 * hi {
+        return None;
+    }
+    ata.cholesky().map(|ch| ch.solve(atb))
 }

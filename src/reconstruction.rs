@@ -1333,60 +1333,42 @@ impl Reconstruction {
     pub fn completed_matrix(&self) -> Mat<f64> {
         let (f, n) = (self.input_frame_ids.len(), self.input_track_ids.len());
         let mut out = Mat::from_fn(2 * f, n, |_, _| f64::NAN);
+        // Writes every kept frame's prediction of the kept tracks (`kept(kf, kp)`) and of the
+        // outlier tracks (`outlier(kf, k)`) at their input positions.
+        let mut fill = |kept: &dyn Fn(usize, usize) -> [f64; 2],
+                        outlier: &dyn Fn(usize, usize) -> [f64; 2]| {
+            for (kf, &fi) in self.kept_frames.iter().enumerate() {
+                for (kp, &pi) in self.kept_tracks.iter().enumerate() {
+                    let q = kept(kf, kp);
+                    out[(2 * fi, pi)] = q[0];
+                    out[(2 * fi + 1, pi)] = q[1];
+                }
+                for (k, &pi) in self.outlier_tracks.iter().enumerate() {
+                    let q = outlier(kf, k);
+                    out[(2 * fi, pi)] = q[0];
+                    out[(2 * fi + 1, pi)] = q[1];
+                }
+            }
+        };
+        let v2 = |v: nalgebra::Vector2<f64>| [v[0], v[1]];
         if self.sparse.is_some() {
-            for (kf, &fi) in self.kept_frames.iter().enumerate() {
-                for (kp, &pi) in self.kept_tracks.iter().enumerate() {
-                    let q = self.model.project(kf, kp);
-                    out[(2 * fi, pi)] = q[0];
-                    out[(2 * fi + 1, pi)] = q[1];
-                }
-                for (k, &pi) in self.outlier_tracks.iter().enumerate() {
-                    let q = self.outlier_model.project(kf, k);
-                    out[(2 * fi, pi)] = q[0];
-                    out[(2 * fi + 1, pi)] = q[1];
-                }
-            }
-            return out;
-        }
-        if let Some(pr) = &self.perspective {
-            for (kf, &fi) in self.kept_frames.iter().enumerate() {
-                for (kp, &pi) in self.kept_tracks.iter().enumerate() {
-                    let q = pr.model.project(kf, kp);
-                    out[(2 * fi, pi)] = q[0];
-                    out[(2 * fi + 1, pi)] = q[1];
-                }
-                for (k, &pi) in self.outlier_tracks.iter().enumerate() {
-                    let q = pr.model.project_point(kf, &pr.outlier_points[k]);
-                    out[(2 * fi, pi)] = q[0];
-                    out[(2 * fi + 1, pi)] = q[1];
-                }
-            }
-            return out;
-        }
-        if let Some(pr) = &self.projective {
-            for (kf, &fi) in self.kept_frames.iter().enumerate() {
-                for (kp, &pi) in self.kept_tracks.iter().enumerate() {
-                    let q = pr.model.project(kf, kp);
-                    out[(2 * fi, pi)] = q[0];
-                    out[(2 * fi + 1, pi)] = q[1];
-                }
-                for (k, &pi) in self.outlier_tracks.iter().enumerate() {
-                    let q = projective::project(&pr.model.cameras[kf], &pr.outlier_points[k]);
-                    out[(2 * fi, pi)] = q[0];
-                    out[(2 * fi + 1, pi)] = q[1];
-                }
-            }
-            return out;
-        }
-        for (kf, &fi) in self.kept_frames.iter().enumerate() {
-            for (kp, &pi) in self.kept_tracks.iter().enumerate() {
-                out[(2 * fi, pi)] = self.affine_prediction[(2 * kf, kp)];
-                out[(2 * fi + 1, pi)] = self.affine_prediction[(2 * kf + 1, kp)];
-            }
-            for (k, &pi) in self.outlier_tracks.iter().enumerate() {
-                out[(2 * fi, pi)] = self.outlier_prediction[(2 * kf, k)];
-                out[(2 * fi + 1, pi)] = self.outlier_prediction[(2 * kf + 1, k)];
-            }
+            fill(&|kf, kp| v2(self.model.project(kf, kp)), &|kf, k| {
+                v2(self.outlier_model.project(kf, k))
+            });
+        } else if let Some(pr) = &self.perspective {
+            fill(&|kf, kp| pr.model.project(kf, kp), &|kf, k| {
+                pr.model.project_point(kf, &pr.outlier_points[k])
+            });
+        } else if let Some(pr) = &self.projective {
+            fill(&|kf, kp| pr.model.project(kf, kp), &|kf, k| {
+                projective::project(&pr.model.cameras[kf], &pr.outlier_points[k])
+            });
+        } else {
+            let (a, o) = (&self.affine_prediction, &self.outlier_prediction);
+            fill(
+                &|kf, kp| [a[(2 * kf, kp)], a[(2 * kf + 1, kp)]],
+                &|kf, k| [o[(2 * kf, k)], o[(2 * kf + 1, k)]],
+            );
         }
         out
     }
@@ -2239,7 +2221,7 @@ fn sparse_reconstruction(
         table: kept,
         frames: kept_frames,
         tracks: kept_tracks,
-        mut set_aside,
+        set_aside,
     } = kept;
     let mut warnings = vec![format!(
         "sparse pipeline: {reason}; the dense-only stages (RANSAC robust pass, σ4/σ3, metric \
@@ -2271,24 +2253,11 @@ fn sparse_reconstruction(
     let nf = kept.n_frames();
     prob.triangulate(&mut all);
     let mirrored = metric::apply_necker_convention(&mut all);
-    let (frame_res, track_res) = prob.residuals(&all);
     let inlier = &fit.inlier;
+    // Frames' residuals over the fit's (inlier) tracks, every track's own.
+    let (frame_fit, track_res) = prob.residuals(&all, inlier);
     let inl: Vec<usize> = (0..kept.n_tracks()).filter(|&p| inlier[p]).collect();
     let out: Vec<usize> = (0..kept.n_tracks()).filter(|&p| !inlier[p]).collect();
-    // Frame residuals over the inlier tracks only.
-    let mut frame_fit = frame_res.clone();
-    if !out.is_empty() {
-        frame_fit.iter_mut().for_each(|r| *r = (0.0, 0));
-        let g = &prob.graph;
-        for &p in &inl {
-            for o in g.track(p) {
-                let f = g.cam[o];
-                let d = all.project(f, p) - prob.pixel(o);
-                frame_fit[f].0 += d.norm_squared();
-                frame_fit[f].1 += 1;
-            }
-        }
-    }
     let (ss, n): (f64, usize) = inl.iter().fold((0.0, 0), |(s, n), &p| {
         (s + track_res[p].0, n + track_res[p].1)
     });
@@ -2347,7 +2316,6 @@ fn sparse_reconstruction(
         ));
     }
     warnings.extend(set_aside_warning(&set_aside));
-    set_aside.shrink_to_fit();
     for w in &warnings {
         timer.observer.on_event(&Event::Warning { message: w });
     }

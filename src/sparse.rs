@@ -310,24 +310,25 @@ impl SparseProblem {
     /// `normalize_scale` (not for the orthographic camera, whose unit scale is in pixels).
     /// `O(n_obs)`.
     pub fn new(table: &TrackTable, normalize_scale: bool) -> Self {
-        let (ptr, obs) = table.by_track();
-        let n = obs.len().max(1) as f64;
-        let (mut cx, mut cy) = (0.0, 0.0);
-        for &(_, x, y) in &obs {
-            cx += x;
-            cy += y;
-        }
+        let entries = || (0..table.n_frames()).flat_map(|f| table.frame_row(f).entries());
+        let n = table.n_observed().max(1) as f64;
+        let (cx, cy) = entries().fold((0.0, 0.0), |(a, b), e| (a + e.x, b + e.y));
         let centre = [cx / n, cy / n];
-        let mut ss = 0.0;
-        for &(_, x, y) in &obs {
-            ss += (x - centre[0]).powi(2) + (y - centre[1]).powi(2);
-        }
+        let ss: f64 = entries()
+            .map(|e| (e.x - centre[0]).powi(2) + (e.y - centre[1]).powi(2))
+            .sum();
         let scale = (ss / (2.0 * n)).sqrt();
         let scale = if normalize_scale && scale > 0.0 && scale.is_finite() {
             scale
         } else {
             1.0
         };
+        Self::with_normalization(table, centre, scale)
+    }
+
+    /// The observations of `table`, by track, as `(w − centre) / scale`. `O(n_obs)`.
+    pub fn with_normalization(table: &TrackTable, centre: [f64; 2], scale: f64) -> Self {
+        let (ptr, obs) = table.by_track();
         let graph = Graph {
             n_cams: table.n_frames(),
             n_pts: table.n_tracks(),
@@ -485,24 +486,11 @@ impl SparseProblem {
             let mut ata = Matrix3::<f64>::zeros();
             let mut atb = Vector3::<f64>::zeros();
             for o in g.track(p) {
-                let f = g.cam[o];
-                let r = model.rotations[f].matrix();
-                let sc = model.scales[f];
-                for row in 0..2 {
-                    let a = Vector3::new(r[(row, 0)], r[(row, 1)], r[(row, 2)]) * sc;
-                    let b = self.pixel(o)[row] - model.translations[f][row];
-                    ata += a * a.transpose();
-                    atb += a * b;
-                }
+                let w = self.pixel(o);
+                model.accumulate(g.cam[o], [w[0], w[1]], &mut ata, &mut atb);
             }
-            let eig = ata.symmetric_eigenvalues();
-            let (lo, hi) = (eig.min(), eig.max());
-            if hi <= 0.0 || lo <= 1e-10 * hi {
-                failed.push(p);
-                continue;
-            }
-            match ata.cholesky() {
-                Some(ch) => model.points[p] = ch.solve(&atb),
+            match crate::camera::solve_point(&ata, &atb) {
+                Some(x) => model.points[p] = x,
                 None => failed.push(p),
             }
         }
@@ -519,8 +507,9 @@ impl SparseProblem {
         )
     }
 
-    /// Per frame and per track, `(Σ r², #observations)` of a metric model, pixels.
-    pub fn residuals(&self, model: &MetricModel) -> (Vec<SumSq>, Vec<SumSq>) {
+    /// Per frame and per track, `(Σ r², #observations)` of a metric model, pixels; the
+    /// frames' sums over the tracks with `counted[p]` only (the fit's), in one pass.
+    pub fn residuals(&self, model: &MetricModel, counted: &[bool]) -> (Vec<SumSq>, Vec<SumSq>) {
         let g = &self.graph;
         let mut frames = vec![(0.0, 0usize); g.n_cams];
         let mut tracks = vec![(0.0, 0usize); g.n_pts];
@@ -529,8 +518,10 @@ impl SparseProblem {
                 let f = g.cam[o];
                 let d = model.project(f, p) - self.pixel(o);
                 let ss = d.norm_squared();
-                frames[f].0 += ss;
-                frames[f].1 += 1;
+                if counted[p] {
+                    frames[f].0 += ss;
+                    frames[f].1 += 1;
+                }
                 tr.0 += ss;
                 tr.1 += 1;
             }
@@ -895,25 +886,8 @@ pub fn fit(
         ));
     }
     // Second round without the outlier tracks, from the current cameras.
-    let mut prob2 = SparseProblem::new(&sub, camera != CameraModel::Orthographic);
-    // Keep the first round's normalization so the cameras carry over.
-    prob2.graph.w = prob2
-        .graph
-        .w
-        .iter()
-        .map(|w| {
-            let px = [
-                w[0] * prob2.scale + prob2.centre[0],
-                w[1] * prob2.scale + prob2.centre[1],
-            ];
-            [
-                (px[0] - prob.centre[0]) / prob.scale,
-                (px[1] - prob.centre[1]) / prob.scale,
-            ]
-        })
-        .collect();
-    prob2.centre = prob.centre;
-    prob2.scale = prob.scale;
+    // The first round's normalization, so that the cameras carry over.
+    let prob2 = SparseProblem::with_normalization(&sub, prob.centre, prob.scale);
     let mut pts2: Vec<f64> = keep
         .iter()
         .flat_map(|&p| pts[3 * p..3 * p + 3].to_vec())
