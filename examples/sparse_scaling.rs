@@ -48,7 +48,7 @@ impl rank3::Observer for Printer {
                 rms,
                 lambda,
                 ..
-            } => eprintln!("{solver}[{run}] {iteration} rms {rms:.6} lambda {lambda:.3e}"),
+            } => eprintln!("{solver}[{run}] {iteration} rms {rms:.10} lambda {lambda:.3e}"),
             rank3::Event::StageFinished { stage, seconds } => {
                 eprintln!("stage {stage}: {seconds:.2} s")
             }
