@@ -3,7 +3,7 @@
 //! ```text
 //! FrameSource (folder of PNG/JPEG, or video via ffmpeg) ─→ GrayImage per frame
 //!   ─→ Pyramid (smoothing + ×½ subsampling, Scharr gradients per level)
-//!   ─→ frame 0: detect_corners (or the caller's initial points)
+//!   ─→ frame 0: detect_corners + sub-pixel refinement (or the caller's initial points)
 //!   ─→ frame t→t+1: track_points (Bouguet's pyramidal LK + validity checks)
 //!   ─→ re-detection in empty regions when too few tracks are alive
 //!   ─→ TrackTable (frames × tracks, partial)
@@ -22,6 +22,7 @@
 //! [`TrackTable`] it produces.
 //!
 //! Complexity per frame: O(W·H) for the pyramid (and detection when it runs), plus
+//! O(D·r²·I) to refine D new corners to sub-pixel positions ([`subpixel`]), plus
 //! O(P·L·w²·K) for tracking P points over L levels with a w×w window and K iterations
 //! (×2 with the forward–backward check), parallel over points.
 
@@ -33,6 +34,7 @@ pub mod frames;
 pub mod klt;
 pub mod pyramid;
 pub mod scene3d;
+pub mod subpixel;
 pub mod synthetic;
 
 use std::collections::BTreeMap;
@@ -42,6 +44,7 @@ pub use detect::{Corner, DetectConfig, detect_corners, detect_corners_filtered};
 pub use frames::{FrameSource, GrayImage};
 pub use klt::{Failure, KltConfig, track_points};
 pub use pyramid::Pyramid;
+pub use subpixel::{SubpixelConfig, SubpixelMethod, refine_corners};
 
 use crate::tracks::{Id, TrackTable};
 use crate::{Error, Result};
@@ -53,6 +56,12 @@ pub struct TrackerConfig {
     pub detect: DetectConfig,
     /// Lucas–Kanade tracking and validity checks.
     pub klt: KltConfig,
+    /// Sub-pixel refinement of detected corners before they are tracked (Förstner's operator,
+    /// as OpenCV's `cornerSubPix`; [`subpixel`]); `None` starts tracks at whole pixels.
+    /// Initial points given by the caller are never moved. Default `Some` of
+    /// [`SubpixelConfig::default`].
+    #[serde(default = "default_subpixel")]
+    pub subpixel: Option<SubpixelConfig>,
     /// Detect new corners when tracks die (tracker started by detection). Default `true`.
     pub redetect: bool,
     /// Detect new corners when tracks die in a tracker started from initial points
@@ -74,6 +83,7 @@ impl Default for TrackerConfig {
         Self {
             detect: DetectConfig::default(),
             klt: KltConfig::default(),
+            subpixel: default_subpixel(),
             redetect: true,
             redetect_with_points: false,
             redetect_below: 0.9,
@@ -88,6 +98,9 @@ impl TrackerConfig {
     pub fn validate(&self) -> Result<()> {
         self.detect.validate()?;
         self.klt.validate()?;
+        if let Some(s) = &self.subpixel {
+            s.validate()?;
+        }
         if !(0.0..=1.0).contains(&self.redetect_below) {
             return Err(Error::InvalidConfig {
                 field: "redetect_below",
@@ -96,6 +109,10 @@ impl TrackerConfig {
         }
         Ok(())
     }
+}
+
+fn default_subpixel() -> Option<SubpixelConfig> {
+    Some(SubpixelConfig::default())
 }
 
 /// Counts of what happened in one frame.
@@ -347,9 +364,14 @@ impl Tracker {
         dcfg.max_features = cap - alive;
         // Only corners the tracker's own low-texture test accepts (else they die at once).
         let (win, thr) = (self.cfg.klt.window, self.cfg.klt.min_eigenvalue);
-        let corners = detect_corners_filtered(l0, &dcfg, self.border(), mask.as_deref(), |x, y| {
-            klt::window_min_eigenvalue(l0, x, y, win) >= thr
-        });
+        let mut corners =
+            detect_corners_filtered(l0, &dcfg, self.border(), mask.as_deref(), |x, y| {
+                klt::window_min_eigenvalue(l0, x, y, win) >= thr
+            });
+        if let Some(sp) = &self.cfg.subpixel {
+            let margin = self.cfg.klt.margin();
+            refine_corners(l0, &mut corners, sp, self.cfg.detect.block_size, margin);
+        }
         for c in &corners {
             self.tracks.push(TrackState {
                 id: self.next_id,
