@@ -60,6 +60,12 @@
 //! [`Error::Parse`] naming the file, the 1-based line and the field (`QX`,
 //! `POINTS2D[3].POINT3D_ID`, `TRACK[1].IMAGE_ID`, ...).
 //!
+//! # Tracks of a model
+//!
+//! [`read_tracks`] reads only `images.txt` into a [`crate::TrackTable`] — one track per 3D
+//! point id, one frame per image, ordered by name — so that `rank3 reconstruct DIR` takes a
+//! COLMAP model's matches as its input.
+//!
 //! # Cost
 //!
 //! Writing, reading and validating are linear in the number of cameras, images, keypoints
@@ -983,6 +989,184 @@ fn read_points(path: &Path, lines: &mut Vec<usize>) -> Result<Vec<ColmapPoint>> 
     Ok(points)
 }
 
+/// Compares image names in natural order: runs of digits by their value (`img2` before
+/// `img10`), everything else character by character; equal-valued runs (`01`, `1`) by their
+/// text, so the order is total.
+pub fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
+    use std::cmp::Ordering;
+    let (mut x, mut y) = (a, b);
+    loop {
+        match (x.chars().next(), y.chars().next()) {
+            (None, None) => return a.cmp(b),
+            (None, Some(_)) => return Ordering::Less,
+            (Some(_), None) => return Ordering::Greater,
+            (Some(c), Some(d)) if c.is_ascii_digit() && d.is_ascii_digit() => {
+                let run = |s: &str| s.find(|c: char| !c.is_ascii_digit()).unwrap_or(s.len());
+                let (rx, ry) = (run(x), run(y));
+                let (dx, dy) = (
+                    x[..rx].trim_start_matches('0'),
+                    y[..ry].trim_start_matches('0'),
+                );
+                let o = dx.len().cmp(&dy.len()).then_with(|| dx.cmp(dy));
+                if o != Ordering::Equal {
+                    return o;
+                }
+                (x, y) = (&x[rx..], &y[ry..]);
+            }
+            (Some(c), Some(d)) => {
+                if c != d {
+                    return c.cmp(&d);
+                }
+                (x, y) = (&x[c.len_utf8()..], &y[d.len_utf8()..]);
+            }
+        }
+    }
+}
+
+/// The tracks of a COLMAP text model in `dir`, read from its `images.txt` alone (the
+/// cameras and 3D points are not needed): every `POINT3D_ID` a keypoint names becomes one
+/// track (id = the 3D point id, tracks in ascending id), every image one frame (id = its
+/// `NAME`, an integer id when the name is one, frames in the natural order of the names,
+/// [`natural_cmp`]). Keypoints with `POINT3D_ID` `-1` are unmatched: they are no
+/// observation, and their number is reported in the warnings. Coordinates are converted to
+/// rank3's convention (top-left pixel centre at `(0, 0)`): `x − 0.5`, `y − 0.5`
+/// ([`PIXEL_CENTRE_OFFSET`]), the inverse of what [`crate::output::colmap_model`] writes.
+///
+/// A 3D point seen twice in one image (COLMAP allows it; a track table cannot hold it) keeps
+/// its first keypoint there, and the others are reported in the warnings. Returns the table
+/// and the warnings.
+///
+/// Errors: [`Error::Io`] when `images.txt` cannot be read (the message says so when the
+/// folder holds a binary model, `images.bin`, instead); [`Error::Parse`] naming the line and
+/// field for a malformed line, a coordinate that is not finite, or two images with the same
+/// name; [`Error::EmptyTable`] when no keypoint names a 3D point.
+pub fn read_tracks(dir: &Path) -> Result<(crate::TrackTable, Vec<String>)> {
+    use crate::tracks::Id;
+    let path = dir.join(IMAGES_TXT);
+    if !path.is_file() {
+        let hint = if dir.join("images.bin").is_file() {
+            "the folder holds a binary COLMAP model (images.bin): convert it to text with \
+             `colmap model_converter --input_path DIR --output_path DIR --output_type TXT`"
+                .to_string()
+        } else if dir.join("sparse").is_dir() {
+            "a folder given as a track table must hold a COLMAP text model; COLMAP puts its \
+             models in sparse/0, sparse/1, ...: give that folder"
+                .to_string()
+        } else {
+            "a folder given as a track table must hold a COLMAP text model (images.txt)".into()
+        };
+        return Err(Error::io(
+            &path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, hint),
+        ));
+    }
+    let (mut lines, mut points_lines) = (Vec::new(), Vec::new());
+    let images = read_images(&path, &mut lines, &mut points_lines)?;
+    // Frames: images in natural order of their names, which must be unique.
+    let mut order: Vec<usize> = (0..images.len()).collect();
+    order.sort_by(|&a, &b| natural_cmp(&images[a].name, &images[b].name));
+    for w in order.windows(2) {
+        let (a, b) = (w[0].min(w[1]), w[0].max(w[1]));
+        if images[a].name == images[b].name {
+            return Err(Error::parse(
+                &path,
+                lines[b],
+                "NAME",
+                format!(
+                    "image name `{}` is also the name of the image on line {}",
+                    images[b].name, lines[a]
+                ),
+            ));
+        }
+    }
+    // Tracks: the 3D point ids, ascending.
+    let mut ids: Vec<u64> = images
+        .iter()
+        .flat_map(|im| im.points2d.iter().filter_map(|kp| kp.1))
+        .collect();
+    ids.sort_unstable();
+    ids.dedup();
+    if ids.is_empty() {
+        return Err(Error::EmptyTable {
+            path: Some(path),
+            reason: "no keypoint names a 3D point (every POINT3D_ID is -1)".into(),
+        });
+    }
+    let mut obs: Vec<(u32, u32, f64, f64)> = Vec::new();
+    let (mut unmatched, mut repeated) = (0usize, Vec::new());
+    let mut seen = vec![u32::MAX; ids.len()];
+    for (frame, &i) in order.iter().enumerate() {
+        let im = &images[i];
+        for (k, &([x, y], owner)) in im.points2d.iter().enumerate() {
+            for (v, c) in [(x, "X"), (y, "Y")] {
+                if !v.is_finite() {
+                    return Err(Error::parse(
+                        &path,
+                        points_lines[i],
+                        format!("POINTS2D[{k}].{c}"),
+                        format!("{v} is not a finite pixel coordinate"),
+                    ));
+                }
+            }
+            let Some(owner) = owner else {
+                unmatched += 1;
+                continue;
+            };
+            let track = ids.binary_search(&owner).unwrap_or_default();
+            if seen[track] == frame as u32 {
+                repeated.push((points_lines[i], k, owner));
+                continue;
+            }
+            seen[track] = frame as u32;
+            obs.push((
+                frame as u32,
+                track as u32,
+                x - PIXEL_CENTRE_OFFSET,
+                y - PIXEL_CENTRE_OFFSET,
+            ));
+        }
+    }
+    let frame_ids: Vec<Id> = order.iter().map(|&i| Id::parse(&images[i].name)).collect();
+    let track_ids: Vec<Id> = ids
+        .iter()
+        .map(|&id| match i64::try_from(id) {
+            Ok(v) => Id::Int(v),
+            Err(_) => Id::Str(id.to_string()),
+        })
+        .collect();
+    // Distinct names can still parse to the same id (`01` and `1`): keep the names then.
+    let mut distinct = frame_ids.clone();
+    distinct.sort();
+    distinct.dedup();
+    let frame_ids = if distinct.len() == frame_ids.len() {
+        frame_ids
+    } else {
+        order
+            .iter()
+            .map(|&i| Id::Str(images[i].name.clone()))
+            .collect()
+    };
+    let table = crate::TrackTable::from_observations(frame_ids, track_ids, &obs)
+        .map_err(|_| Error::InvalidModel("a keypoint was counted twice".into()))?;
+    let mut warnings = Vec::new();
+    if unmatched > 0 {
+        warnings.push(format!(
+            "{}: {unmatched} keypoint(s) without a 3D point (POINT3D_ID -1) are not track \
+             observations",
+            path.display()
+        ));
+    }
+    if let Some(&(line, k, owner)) = repeated.first() {
+        warnings.push(format!(
+            "{}: {} keypoint(s) name a 3D point already seen in the same image; the first \
+             keypoint of each was kept (first: line {line}, POINTS2D[{k}], 3D point {owner})",
+            path.display(),
+            repeated.len()
+        ));
+    }
+    Ok((table, warnings))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1542,5 +1726,38 @@ mod tests {
         assert!(matches!(err, Error::InvalidConfig { .. }), "{err}");
         assert!(!dir.join(CAMERAS_TXT).exists());
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn natural_order_of_image_names() {
+        let mut names = vec![
+            "img10.png",
+            "img2.png",
+            "img1.png",
+            "img01.png",
+            "b",
+            "a10b",
+            "a9c",
+            "",
+            "9",
+            "10",
+        ];
+        names.sort_by(|a, b| natural_cmp(a, b));
+        assert_eq!(
+            names,
+            [
+                "",
+                "9",
+                "10",
+                "a9c",
+                "a10b",
+                "b",
+                "img01.png",
+                "img1.png",
+                "img2.png",
+                "img10.png"
+            ]
+        );
+        assert_eq!(natural_cmp("x", "x"), std::cmp::Ordering::Equal);
     }
 }

@@ -29,8 +29,17 @@ pub enum Error {
         message: String,
     },
     /// The file extension does not name a known track-table format.
-    #[error("{}: unknown track-table format (expected .csv, .txt or .json)", path.display())]
+    #[error(
+        "{}: unknown track-table format (expected .csv, .txt, .json, .npy, .npz or a COLMAP \
+         text model folder holding images.txt)",
+        path.display()
+    )]
     UnknownFormat { path: PathBuf },
+    /// A NumPy `.npy` / `.npz` input is malformed or is not a track layout rank3 reads
+    /// (docs/formats.md): the file, the `.npz` member, the field at fault and the kind of
+    /// fault ([`crate::tracks::npy::ArrayError`], boxed to keep `Error` small).
+    #[error(transparent)]
+    Array(Box<crate::tracks::npy::ArrayError>),
     /// The table has no usable observations.
     #[error("empty track table{}: {reason}", source_suffix(.path))]
     EmptyTable {

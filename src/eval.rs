@@ -84,6 +84,16 @@ pub fn structure_error(est: &[Vector3<f64>], truth: &[Vector3<f64>]) -> f64 {
 /// expressed relative to frame 0 (`R_f R_0ᵀ`) and allowing the global depth reversal
 /// (`D R D`, `D = diag(1, 1, −1)`): the branch with the smaller median is returned.
 pub fn rotation_errors_deg(est: &[Rotation3<f64>], truth: &[Rotation3<f64>]) -> Vec<f64> {
+    rotation_errors_deg_with(est, truth, true)
+}
+
+/// [`rotation_errors_deg`], with the depth-reversal branch only when `allow_mirror` (two
+/// Euclidean perspective reconstructions have no such ambiguity).
+pub fn rotation_errors_deg_with(
+    est: &[Rotation3<f64>],
+    truth: &[Rotation3<f64>],
+    allow_mirror: bool,
+) -> Vec<f64> {
     if est.is_empty() || est.len() != truth.len() {
         return Vec::new();
     }
@@ -101,7 +111,11 @@ pub fn rotation_errors_deg(est: &[Rotation3<f64>], truth: &[Rotation3<f64>]) -> 
             })
             .collect()
     };
-    let (a, b) = (branch(false), branch(true));
+    let a = branch(false);
+    if !allow_mirror {
+        return a;
+    }
+    let b = branch(true);
     if median(&a) <= median(&b) { a } else { b }
 }
 

@@ -24,6 +24,7 @@ pub mod atomic;
 pub mod budget;
 pub mod camera;
 pub mod colmap;
+pub mod compare;
 pub mod completion;
 pub mod datasets;
 pub mod error;
@@ -37,6 +38,7 @@ pub mod output;
 pub mod perspective;
 pub mod projective;
 pub mod reconstruction;
+pub mod reconstruction_file;
 #[cfg(feature = "rerun")]
 pub mod recording;
 pub mod refine;

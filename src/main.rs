@@ -21,7 +21,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Reconstruct metric structure and cameras from a track table (.csv, .txt, .json).
+    /// Reconstruct metric structure and cameras from a track table (.csv, .txt, .json, .npy,
+    /// .npz, a COLMAP text model folder, or --x/--y matrices).
     Reconstruct(ReconstructArgs),
     /// Write a synthetic scene with ground truth: DIR/tracks.csv and DIR/truth.json.
     Synth(SynthArgs),
@@ -29,6 +30,43 @@ enum Command {
     Track(TrackArgs),
     /// Video or images → tracks → reconstruction, in one command.
     Run(RunArgs),
+    /// Score a reconstruction against a reference (synth's truth.json or another
+    /// reconstruction.json): structure, rotation, camera centre and focal length errors.
+    Eval(EvalArgs),
+}
+
+#[derive(clap::Args)]
+struct EvalArgs {
+    /// The reconstruction: a reconstruction.json, or the output folder holding it.
+    reconstruction: PathBuf,
+    /// The reference: the truth.json written by `rank3 synth`, another reconstruction.json,
+    /// or a folder holding either.
+    #[arg(long, short = 'r', value_name = "FILE|DIR")]
+    reference: PathBuf,
+    /// Print the scores as JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `rank3 eval`: the table (or JSON) on stdout; errors as the other subcommands (exit 1).
+fn eval_cmd(a: &EvalArgs) -> ExitCode {
+    match rank3::compare::evaluate(&a.reconstruction, &a.reference) {
+        Ok(c) if a.json => {
+            say(format_args!(
+                "{}",
+                serde_json::to_string_pretty(&c).unwrap_or_default()
+            ));
+            ExitCode::SUCCESS
+        }
+        Ok(c) => {
+            say(format_args!("{}", c.to_string().trim_end()));
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -62,8 +100,30 @@ impl From<CameraArg> for CameraModel {
 
 #[derive(clap::Args)]
 struct ReconstructArgs {
-    /// Track table: .csv (frame,track,x,y), .txt (dense 2F×N, nan = missing) or .json.
-    tracks: PathBuf,
+    /// Track table: .csv (frame,track,x,y), .txt (dense 2F×N, nan = missing), .json,
+    /// .npy (float array (F, N, 2) or (2F, N), NaN = missing), .npz (`tracks`, or `x` and
+    /// `y`; optional `frame_ids`, `track_ids`), or a folder holding a COLMAP text model
+    /// (images.txt: one track per 3D point, one frame per image). See docs/formats.md.
+    #[arg(required_unless_present = "x", value_name = "TRACKS")]
+    tracks: Option<PathBuf>,
+    /// Instead of TRACKS: the x coordinates as a frames × tracks matrix (one row per frame,
+    /// nan = missing; text, or a 2-D .npy), e.g. the CMU hotel tracked_points_Xs.txt. Needs
+    /// --y.
+    #[arg(
+        long = "x",
+        value_name = "FILE",
+        requires = "y",
+        conflicts_with = "tracks"
+    )]
+    x: Option<PathBuf>,
+    /// The y coordinates matching --x (same shape and format).
+    #[arg(
+        long = "y",
+        value_name = "FILE",
+        requires = "x",
+        conflicts_with = "tracks"
+    )]
+    y: Option<PathBuf>,
     /// Output directory (reconstruction.json, completed.txt, points.ply).
     #[arg(long)]
     out: PathBuf,
@@ -397,6 +457,7 @@ fn main() -> ExitCode {
         Command::Synth(a) => synth(&a),
         Command::Track(a) => track_cmd(&a),
         Command::Run(a) => run_cmd(&a),
+        Command::Eval(a) => return eval_cmd(&a),
     };
     // A recording that could not be written or streamed is an error too (after the
     // command's own outputs, which are written by then).
@@ -418,7 +479,10 @@ fn main() -> ExitCode {
 }
 
 fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
-    let mut inputs: Vec<&Path> = vec![&a.tracks];
+    let mut inputs: Vec<&Path> = [&a.tracks, &a.x, &a.y]
+        .into_iter()
+        .filter_map(Option::as_deref)
+        .collect();
     inputs.extend(a.images.as_deref());
     refuse_overwriting_inputs(
         &inputs,
@@ -429,7 +493,16 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     )?;
     // The table is read before the recording opens (opening it replaces an existing .rrd,
     // which bad input must not destroy).
-    let loaded = read_tracks(&a.tracks)?;
+    let loaded = match (&a.tracks, &a.x, &a.y) {
+        (Some(t), _, _) => read_tracks(t)?,
+        (None, Some(x), Some(y)) => rank3::tracks::read_xy(x, y)?,
+        _ => {
+            return Err(rank3::Error::InvalidConfig {
+                field: "TRACKS",
+                message: "give a track table, or --x and --y".into(),
+            });
+        }
+    };
     #[cfg(feature = "rerun")]
     let recording = a.record.open(
         "rank3",
@@ -446,7 +519,10 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     let t = &loaded.table;
     eprintln!(
         "read {}: {} frames × {} tracks, {} observations ({:.1} % filled)",
-        a.tracks.display(),
+        match (&a.tracks, &a.y) {
+            (None, Some(y)) => format!("{} and {}", loaded.path.display(), y.display()),
+            _ => loaded.path.display().to_string(),
+        },
         t.n_frames(),
         t.n_tracks(),
         t.n_observed(),
@@ -968,7 +1044,7 @@ impl TrackOpts {
 struct TrackArgs {
     /// A folder of PNG/JPEG frames (natural name order) or a video file (needs ffmpeg).
     input: PathBuf,
-    /// Output track table: .csv, .txt or .json.
+    /// Output track table: .csv, .txt, .json, .npy or .npz.
     #[arg(long)]
     out: PathBuf,
     #[command(flatten)]

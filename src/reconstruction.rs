@@ -708,7 +708,8 @@ pub struct StageTime {
     pub seconds: f64,
 }
 
-/// A metric reconstruction. Serializes to `reconstruction.json`.
+/// A metric reconstruction. [`Reconstruction::to_json`] writes it as `reconstruction.json`
+/// (its fields after a `schema` key); [`crate::reconstruction_file`] reads that back.
 #[derive(Debug, Clone, Serialize)]
 pub struct Reconstruction {
     /// The camera model of the result (with [`CameraModel::Auto`], the one chosen).
@@ -1373,9 +1374,21 @@ impl Reconstruction {
         out
     }
 
-    /// Serializes to the `reconstruction.json` document.
+    /// Serializes to the `reconstruction.json` document: `"schema"`
+    /// ([`crate::reconstruction_file::SCHEMA`]) first, then this struct's fields. Read it
+    /// back with [`crate::reconstruction_file::read`].
     pub fn to_json(&self) -> String {
-        serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+        #[derive(Serialize)]
+        struct Document<'a> {
+            schema: &'static str,
+            #[serde(flatten)]
+            reconstruction: &'a Reconstruction,
+        }
+        let doc = Document {
+            schema: crate::reconstruction_file::SCHEMA,
+            reconstruction: self,
+        };
+        serde_json::to_string_pretty(&doc).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
     }
 }
 

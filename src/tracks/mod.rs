@@ -5,11 +5,15 @@
 //! completeness: tracks enter and leave the frame.
 //!
 //! Formats (chosen by file extension, documented in `docs/formats.md`): `.csv` long format
-//! ([`csv`]), `.txt` dense 2F×N measurement matrix ([`dense`]), `.json` ([`json`]).
+//! ([`csv`]), `.txt` dense 2F×N measurement matrix ([`dense`]), `.json` ([`json`]), NumPy
+//! `.npy` / `.npz` arrays ([`npy`]), and a folder holding a COLMAP text model's `images.txt`
+//! ([`crate::colmap::read_tracks`]). A pair of frames × tracks x and y matrices is read by
+//! [`read_xy`].
 
 pub mod csv;
 pub mod dense;
 pub mod json;
+pub mod npy;
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -168,6 +172,10 @@ pub enum Format {
     DenseTxt,
     /// JSON.
     Json,
+    /// NumPy `.npy`: `(F, N, 2)` or `(2F, N)` float array, NaN for missing.
+    Npy,
+    /// NumPy `.npz`: `tracks` (as `.npy`) or `x` and `y`, optional `frame_ids`, `track_ids`.
+    Npz,
 }
 
 impl Format {
@@ -181,6 +189,8 @@ impl Format {
             Some("csv") => Ok(Format::Csv),
             Some("txt") => Ok(Format::DenseTxt),
             Some("json") => Ok(Format::Json),
+            Some("npy") => Ok(Format::Npy),
+            Some("npz") => Ok(Format::Npz),
             _ => Err(Error::UnknownFormat {
                 path: path.to_path_buf(),
             }),
@@ -188,11 +198,22 @@ impl Format {
     }
 }
 
-/// Reads a track table, choosing the reader by extension, and returns its warnings.
+/// Reads a track table, choosing the reader by extension (a folder is read as a COLMAP
+/// text model: [`crate::colmap::read_tracks`]), and returns its warnings.
 pub fn read_tracks(path: impl AsRef<Path>) -> Result<LoadedTable> {
     let path = path.as_ref();
+    if path.is_dir() {
+        let (table, warnings) = crate::colmap::read_tracks(path)?;
+        return Ok(LoadedTable {
+            table,
+            warnings,
+            path: path.to_path_buf(),
+        });
+    }
     let format = Format::from_path(path)?;
     let (table, warnings) = match format {
+        Format::Npy => (npy::read_npy(path)?, Vec::new()),
+        Format::Npz => npy::read_npz(path)?,
         // Streamed: the file is never held whole in memory.
         Format::Csv => {
             let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
@@ -211,6 +232,47 @@ pub fn read_tracks(path: impl AsRef<Path>) -> Result<LoadedTable> {
         table,
         warnings,
         path: path.to_path_buf(),
+    })
+}
+
+/// Reads a pair of frames × tracks matrices of x and y coordinates (NaN for missing): two
+/// text files ([`dense::read_xy`], the layout of the CMU hotel reference tracks
+/// `tracked_points_Xs.txt` / `tracked_points_Ys.txt`) or two 2-D `.npy` files
+/// ([`npy::read_xy_npy`]). `path` of the result is the x file's.
+pub fn read_xy(x_path: impl AsRef<Path>, y_path: impl AsRef<Path>) -> Result<LoadedTable> {
+    let (x_path, y_path) = (x_path.as_ref(), y_path.as_ref());
+    let is_npy = |p: &Path| {
+        p.extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("npy"))
+    };
+    let table = match (is_npy(x_path), is_npy(y_path)) {
+        (true, true) => npy::read_xy_npy(x_path, y_path)?,
+        (false, false) => {
+            let t = dense::read_xy(x_path, y_path)?;
+            if t.n_observed() == 0 {
+                return Err(Error::EmptyTable {
+                    path: Some(x_path.to_path_buf()),
+                    reason: "every entry is nan".into(),
+                });
+            }
+            t
+        }
+        _ => {
+            return Err(Error::InvalidConfig {
+                field: "x/y matrices",
+                message: format!(
+                    "{} and {} must both be .npy arrays or both text matrices",
+                    x_path.display(),
+                    y_path.display()
+                ),
+            });
+        }
+    };
+    Ok(LoadedTable {
+        table,
+        warnings: Vec::new(),
+        path: x_path.to_path_buf(),
     })
 }
 
@@ -276,8 +338,8 @@ impl TrackTable {
         })
     }
 
-    /// Reads a table by extension (`.csv`, `.txt`, `.json`). Reader warnings are discarded;
-    /// use [`read_tracks`] to receive them.
+    /// Reads a table by extension (`.csv`, `.txt`, `.json`, `.npy`, `.npz`) or a COLMAP
+    /// model folder. Reader warnings are discarded; use [`read_tracks`] to receive them.
     pub fn read(path: impl AsRef<Path>) -> Result<TrackTable> {
         read_tracks(path).map(|l| l.table)
     }
@@ -285,12 +347,38 @@ impl TrackTable {
     /// Writes the table in the format named by the extension.
     pub fn write(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
-        let text = match Format::from_path(path)? {
-            Format::Csv => csv::to_string(self),
-            Format::DenseTxt => dense::to_string(self),
-            Format::Json => json::to_string(self),
+        let format = Format::from_path(path)?;
+        if matches!(format, Format::Npy | Format::Npz) {
+            // A NumPy array is dense: F × N × 2 float64, whatever the fill.
+            use crate::budget::{DENSE_TABLE_BYTES, DENSE_TABLE_FACTOR};
+            let needed = self
+                .n_frames()
+                .saturating_mul(self.n_tracks())
+                .saturating_mul(16);
+            let budget = DENSE_TABLE_BYTES
+                .max(DENSE_TABLE_FACTOR.saturating_mul(self.n_observed().saturating_mul(16)));
+            if needed > budget {
+                return Err(Error::TooLarge {
+                    what: format!(
+                        "a dense {} × {} × 2 array for {}",
+                        self.n_frames(),
+                        self.n_tracks(),
+                        path.display()
+                    ),
+                    needed_bytes: needed,
+                    budget_bytes: budget,
+                    advice: "write the sparse .csv format instead".into(),
+                });
+            }
+        }
+        let bytes = match format {
+            Format::Csv => csv::to_string(self).into_bytes(),
+            Format::DenseTxt => dense::to_string(self).into_bytes(),
+            Format::Json => json::to_string(self).into_bytes(),
+            Format::Npy => npy::to_npy(self),
+            Format::Npz => npy::to_npz(self, path)?,
         };
-        crate::atomic::write(path, text)
+        crate::atomic::write(path, bytes)
     }
 
     /// A table from measurements (frame ids `0..F`, track ids `0..N`).
