@@ -23,6 +23,7 @@ use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
+use crate::projective::Observation;
 use crate::tracks::{Id, TrackTable};
 use crate::{CameraModel, Error, MetricModel, Result};
 
@@ -1272,6 +1273,104 @@ mod tests {
         }
         assert!(generate(&perspective(1.25)).is_ok());
     }
+}
+
+/// Frame f's camera of [`perspective_corridor`]: `(K, R, c)` with `P = K [R | −R c]`,
+/// moving along +x at 0.25 units per frame, looking +z with a slow yaw/pitch wobble.
+pub fn perspective_corridor_camera(f: usize) -> (Matrix3<f64>, Rotation3<f64>, Vector3<f64>) {
+    let k = Matrix3::new(500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0);
+    let a = f as f64;
+    let r = Rotation3::from_euler_angles(
+        0.05 * (a / 37.0).sin(),
+        0.08 * (a / 53.0).sin(),
+        0.02 * (a / 71.0).cos(),
+    );
+    let c = Vector3::new(0.25 * a, 0.3 * (a / 90.0).sin(), 0.2 * (a / 60.0).cos());
+    (k, r, c)
+}
+
+/// A long, sparse, video-like table seen in strong perspective, with its true points: a
+/// camera (`K` = 500 px focal length, principal point (320, 240), 640×480 image) moving along
+/// +x at 0.25 units per frame past points at depth 3–7, looking +z with a slow yaw/pitch
+/// wobble ([`perspective_corridor_camera`]). Each point is observed (with Gaussian noise of
+/// `noise` px) in every frame where it projects inside the image; a track ends when it
+/// leaves the view or, with probability 3 % per frame, is lost; tracks seen once are
+/// dropped. About `per_frame` tracks per frame, 2–40 frames each. Returns the observations
+/// (tracks numbered from 0) and, per track, its true point. For the long-sequence
+/// projective and perspective tests and benchmarks.
+pub fn perspective_corridor(
+    frames: usize,
+    per_frame: usize,
+    noise: f64,
+    seed: u64,
+) -> (Vec<Observation>, Vec<Vector3<f64>>) {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, if noise > 0.0 { noise } else { 0.0 })
+        .unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("a zero deviation is valid"));
+    let length = 0.25 * frames as f64 + 20.0;
+    // A point at depth z is in view for about 2·0.64·z / 0.25 ≈ 25 frames at z = 5.
+    let n = (per_frame as f64 * frames as f64 / 22.0) as usize;
+    let pts: Vec<Vector3<f64>> = (0..n)
+        .map(|_| {
+            Vector3::new(
+                rng.random_range(-10.0..length),
+                rng.random_range(-1.5..1.5),
+                rng.random_range(3.0..7.0),
+            )
+        })
+        .collect();
+    let cams: Vec<_> = (0..frames).map(perspective_corridor_camera).collect();
+    let mut obs = Vec::new();
+    let mut next_track = 0;
+    let mut truth = Vec::new();
+    for p in &pts {
+        // Frames where the point is visible, in order; split at losses.
+        let first = ((p[0] - 5.0) / 0.25).floor().max(0.0) as usize;
+        let last = (((p[0] + 5.0) / 0.25).ceil() as usize).min(frames);
+        let mut id: Option<usize> = None;
+        for (f, (k, r, c)) in cams.iter().enumerate().take(last).skip(first) {
+            let x = r * (p - c);
+            let q = k * x;
+            let (u, v) = (q[0] / q[2], q[1] / q[2]);
+            let visible = x[2] > 0.5 && (0.0..640.0).contains(&u) && (0.0..480.0).contains(&v);
+            if !visible || rng.random_range(0.0..1.0) < 0.03 {
+                id = None;
+                continue;
+            }
+            let t = *id.get_or_insert_with(|| {
+                next_track += 1;
+                truth.push(*p);
+                next_track - 1
+            });
+            obs.push(Observation {
+                frame: f,
+                track: t,
+                xy: [u + noise.sample(&mut rng), v + noise.sample(&mut rng)],
+            });
+        }
+    }
+    // Tracks seen once carry no depth: drop them and renumber.
+    let mut count = vec![0usize; next_track];
+    for o in &obs {
+        count[o.track] += 1;
+    }
+    let mut map = vec![usize::MAX; next_track];
+    let mut n_tracks = 0;
+    for t in 0..next_track {
+        if count[t] >= 2 {
+            map[t] = n_tracks;
+            n_tracks += 1;
+        }
+    }
+    obs.retain(|o| count[o.track] >= 2);
+    for o in &mut obs {
+        o.track = map[o.track];
+    }
+    let truth = (0..next_track)
+        .filter(|&t| count[t] >= 2)
+        .map(|t| truth[t])
+        .collect();
+    (obs, truth)
 }
 
 /// A long, sparse, video-like table under the scaled orthographic camera (the affine model

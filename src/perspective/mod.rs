@@ -37,8 +37,11 @@
 //! * B. Triggs, P. McLauchlan, R. Hartley and A. Fitzgibbon, "Bundle adjustment — a modern
 //!   synthesis", 1999 (robust losses §3.2, gauge §9).
 
+mod long;
 pub mod models;
 pub mod selfcal;
+
+pub use long::fit_observations;
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -290,14 +293,22 @@ pub struct Assumed {
 /// The principal point and scale of the upgrade: given, else the image size's, else the
 /// observations' bounding box.
 pub fn assumed_frame(meas: &Measurements, k: &Intrinsics) -> Assumed {
+    assumed_frame_of(
+        meas.observed_pairs()
+            .map(|(f, p)| [meas.w[(2 * f, p)], meas.w[(2 * f + 1, p)]]),
+        k,
+    )
+}
+
+/// [`assumed_frame`] of any set of observed positions (pixels).
+pub fn assumed_frame_of(positions: impl Iterator<Item = [f64; 2]>, k: &Intrinsics) -> Assumed {
     let Some([w, h]) = k.image_size else {
         // Without the image size, the observations' bounding box stands in for it.
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for (f, p) in meas.observed_pairs() {
+        for v in positions {
             for d in 0..2 {
-                let v = meas.w[(2 * f + d, p)];
-                lo[d] = lo[d].min(v);
-                hi[d] = hi[d].max(v);
+                lo[d] = lo[d].min(v[d]);
+                hi[d] = hi[d].max(v[d]);
             }
         }
         let side = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1.0);
@@ -403,50 +414,9 @@ pub fn fit(
         &cfg.sdp,
     ) {
         Ok(up) => {
-            // A shared focal length starts at the median of the frames'.
-            let mut f: Vec<f64> = up
-                .focal
-                .iter()
-                .copied()
-                .filter(|f| f.is_finite() && *f > 0.0)
-                .collect();
-            f.sort_by(f64::total_cmp);
-            let median = f.get(f.len() / 2).copied().unwrap_or(1.0) * s;
-            let focal_px: Vec<f64> = if known_focal {
-                vec![s; nf]
-            } else if cfg.per_frame_focal {
-                up.focal
-                    .iter()
-                    .map(|&f| {
-                        if f.is_finite() && f > 0.0 {
-                            f * s
-                        } else {
-                            median
-                        }
-                    })
-                    .collect()
-            } else {
-                vec![median; nf]
-            };
-            let report = StartReport {
-                kind: "self-calibration",
-                focal_px: if known_focal { s } else { median },
-                mirrored: false,
-                rms_px: f64::NAN,
-                chosen: false,
-            };
-            starts.push((
-                report,
-                PerspectiveModel {
-                    focal_px,
-                    principal_point: assumed.principal_point,
-                    k1: 0.0,
-                    rotations: up.rotations,
-                    translations: up.translations,
-                    points: up.points,
-                },
-            ));
-            selfcal_report = Some(up.report);
+            let (report, model, selfcal) = selfcal_start(up, cfg, &assumed, nf);
+            starts.push((report, model));
+            selfcal_report = Some(selfcal);
         }
         Err(e) => selfcal_error = Some(e),
     }
@@ -522,6 +492,59 @@ pub fn fit(
     out.selfcal = selfcal_report;
     out.starts = starts.into_iter().map(|(r, _)| r).collect();
     Ok(out)
+}
+
+/// The metric start of a self-calibrated reconstruction `up` (normalised units of
+/// `assumed`): a shared focal length starts at the median of the frames', per-frame ones
+/// at each frame's (the median where a frame's is not positive), a known one as given.
+fn selfcal_start(
+    up: selfcal::Upgraded,
+    cfg: &PerspectiveConfig,
+    assumed: &Assumed,
+    nf: usize,
+) -> (StartReport, PerspectiveModel, SelfCalibration) {
+    let s = assumed.scale;
+    let known_focal = cfg.intrinsics.focal_px.is_some();
+    let mut f: Vec<f64> = up
+        .focal
+        .iter()
+        .copied()
+        .filter(|f| f.is_finite() && *f > 0.0)
+        .collect();
+    f.sort_by(f64::total_cmp);
+    let median = f.get(f.len() / 2).copied().unwrap_or(1.0) * s;
+    let focal_px: Vec<f64> = if known_focal {
+        vec![s; nf]
+    } else if cfg.per_frame_focal {
+        up.focal
+            .iter()
+            .map(|&f| {
+                if f.is_finite() && f > 0.0 {
+                    f * s
+                } else {
+                    median
+                }
+            })
+            .collect()
+    } else {
+        vec![median; nf]
+    };
+    let report = StartReport {
+        kind: "self-calibration",
+        focal_px: if known_focal { s } else { median },
+        mirrored: false,
+        rms_px: f64::NAN,
+        chosen: false,
+    };
+    let model = PerspectiveModel {
+        focal_px,
+        principal_point: assumed.principal_point,
+        k1: 0.0,
+        rotations: up.rotations,
+        translations: up.translations,
+        points: up.points,
+    };
+    (report, model, up.report)
 }
 
 /// The scaled-orthographic metric model `w = s_f R_f[0..2] X + t_f` lifted to a pinhole
@@ -620,7 +643,27 @@ fn adjust_from(
     run: usize,
     observer: &mut dyn Observer,
 ) -> Result<PerspectiveFit> {
-    let (nf, np) = (meas.n_frames(), meas.n_points());
+    let norm = Normalization {
+        centre: assumed.principal_point,
+        scale: 1.0 / assumed.scale,
+    };
+    let g = projective::graph(meas, &norm);
+    adjust_graph(&g, start, cfg, assumed, estimate_pp, run, observer)
+}
+
+/// [`adjust_from`] on the camera–point graph `g`, its positions normalised by `assumed`
+/// (`ŵ = (w − c)/s`). Cost per iteration and memory linear in the observations for a
+/// banded camera graph (a video's).
+fn adjust_graph(
+    g: &projective::bundle::Graph,
+    start: PerspectiveModel,
+    cfg: &PerspectiveConfig,
+    assumed: &Assumed,
+    estimate_pp: bool,
+    run: usize,
+    observer: &mut dyn Observer,
+) -> Result<PerspectiveFit> {
+    let (nf, np) = (g.n_cams, g.n_pts);
     if nf < 2 {
         return Err(Error::TooFew {
             what: "frames for a metric bundle adjustment",
@@ -630,12 +673,6 @@ fn adjust_from(
     }
     let s = assumed.scale;
     let known_focal = cfg.intrinsics.focal_px.is_some();
-    let obs: Vec<(usize, usize)> = meas.observed_pairs().collect();
-    let norm = Normalization {
-        centre: assumed.principal_point,
-        scale: 1.0 / s,
-    };
-    let g = projective::graph(meas, &norm);
     let focal = if known_focal {
         Focal::Fixed(cfg.intrinsics.focal_px.unwrap_or(s) / s)
     } else if cfg.per_frame_focal {
@@ -689,7 +726,7 @@ fn adjust_from(
                 inner: metric,
                 loss,
             },
-            &g,
+            g,
             &mut cams,
             &mut pts,
             &mut glob,
@@ -715,7 +752,7 @@ fn adjust_from(
         report = stage
             .run(
                 &Robust { inner: free, loss },
-                &g,
+                g,
                 &mut cams,
                 &mut pts,
                 &mut glob2,
@@ -754,12 +791,15 @@ fn adjust_from(
     downweighted.sort_unstable();
     let rms_px = (ss / n.max(1) as f64).sqrt() * s;
     let model = to_pixels(&metric, &cams, &pts, &glob, nf, assumed);
-    let front = obs
-        .iter()
-        .filter(|&&(f, p)| model.depth(f, &model.points[p]) > 0.0)
-        .count();
+    let front = (0..np)
+        .map(|p| {
+            g.track(p)
+                .filter(|&o| model.depth(g.cam[o], &model.points[p]) > 0.0)
+                .count()
+        })
+        .sum::<usize>();
     Ok(PerspectiveFit {
-        in_front: front as f64 / obs.len().max(1) as f64,
+        in_front: front as f64 / g.n_obs().max(1) as f64,
         model,
         rms_px,
         selfcal: None,

@@ -581,59 +581,9 @@ pub fn fit_observations(
     observer: &mut dyn Observer,
 ) -> Result<ProjectiveFit> {
     cfg.validate()?;
-    let mut order: Vec<usize> = (0..obs.len()).collect();
-    for o in obs {
-        if o.frame >= n_frames || o.track >= n_tracks {
-            return Err(Error::InvalidConfig {
-                field: "observations",
-                message: format!(
-                    "observation of track {} in frame {} is outside the {n_frames}×{n_tracks} table",
-                    o.track, o.frame
-                ),
-            });
-        }
-        if !(o.xy[0].is_finite() && o.xy[1].is_finite()) {
-            return Err(Error::Degenerate(format!(
-                "observed value of track {} in frame {} is not finite",
-                o.track, o.frame
-            )));
-        }
-    }
-    order.sort_unstable_by_key(|&i| (obs[i].track, obs[i].frame));
-    if let Some(w) = order
-        .windows(2)
-        .find(|w| (obs[w[0]].track, obs[w[0]].frame) == (obs[w[1]].track, obs[w[1]].frame))
-    {
-        let o = obs[w[0]];
-        return Err(Error::Degenerate(format!(
-            "track {} is observed twice in frame {}",
-            o.track, o.frame
-        )));
-    }
+    let order = observation_order(obs, n_frames, n_tracks)?;
     let norm = Normalization::of_points(|| obs.iter().map(|o| o.xy));
-    let mut pt_ptr = vec![0usize; n_tracks + 1];
-    for o in obs {
-        pt_ptr[o.track + 1] += 1;
-    }
-    for p in 0..n_tracks {
-        pt_ptr[p + 1] += pt_ptr[p];
-    }
-    let g = Graph {
-        n_cams: n_frames,
-        n_pts: n_tracks,
-        pt_ptr,
-        cam: order.iter().map(|&i| obs[i].frame).collect(),
-        w: order
-            .iter()
-            .map(|&i| {
-                let o = obs[i];
-                [
-                    norm.scale * (o.xy[0] - norm.centre[0]),
-                    norm.scale * (o.xy[1] - norm.centre[1]),
-                ]
-            })
-            .collect(),
-    };
+    let g = observation_graph(obs, &order, n_frames, n_tracks, &norm);
     check_graph(&g)?;
     let px = 1.0 / norm.scale;
     let t0 = Instant::now();
@@ -676,8 +626,85 @@ pub fn fit_observations(
     )
 }
 
+/// Checks a list of observations of an `n_frames × n_tracks` table (indices in range,
+/// finite positions, no (frame, track) pair twice) and returns their order by (track,
+/// frame). `O(n log n)`.
+///
+/// Errors: [`Error::InvalidConfig`] for an index out of range, [`Error::Degenerate`] for
+/// a non-finite position or a repeated pair.
+pub(crate) fn observation_order(
+    obs: &[Observation],
+    n_frames: usize,
+    n_tracks: usize,
+) -> Result<Vec<usize>> {
+    for o in obs {
+        if o.frame >= n_frames || o.track >= n_tracks {
+            return Err(Error::InvalidConfig {
+                field: "observations",
+                message: format!(
+                    "observation of track {} in frame {} is outside the {n_frames}×{n_tracks} table",
+                    o.track, o.frame
+                ),
+            });
+        }
+        if !(o.xy[0].is_finite() && o.xy[1].is_finite()) {
+            return Err(Error::Degenerate(format!(
+                "observed value of track {} in frame {} is not finite",
+                o.track, o.frame
+            )));
+        }
+    }
+    let mut order: Vec<usize> = (0..obs.len()).collect();
+    order.sort_unstable_by_key(|&i| (obs[i].track, obs[i].frame));
+    if let Some(w) = order
+        .windows(2)
+        .find(|w| (obs[w[0]].track, obs[w[0]].frame) == (obs[w[1]].track, obs[w[1]].frame))
+    {
+        let o = obs[w[0]];
+        return Err(Error::Degenerate(format!(
+            "track {} is observed twice in frame {}",
+            o.track, o.frame
+        )));
+    }
+    Ok(order)
+}
+
+/// The camera–point graph of observations taken in `order` ([`observation_order`]), their
+/// positions normalized by `norm`. `O(n)`.
+pub(crate) fn observation_graph(
+    obs: &[Observation],
+    order: &[usize],
+    n_frames: usize,
+    n_tracks: usize,
+    norm: &Normalization,
+) -> Graph {
+    let mut pt_ptr = vec![0usize; n_tracks + 1];
+    for o in obs {
+        pt_ptr[o.track + 1] += 1;
+    }
+    for p in 0..n_tracks {
+        pt_ptr[p + 1] += pt_ptr[p];
+    }
+    Graph {
+        n_cams: n_frames,
+        n_pts: n_tracks,
+        pt_ptr,
+        cam: order.iter().map(|&i| obs[i].frame).collect(),
+        w: order
+            .iter()
+            .map(|&i| {
+                let o = obs[i];
+                [
+                    norm.scale * (o.xy[0] - norm.centre[0]),
+                    norm.scale * (o.xy[1] - norm.centre[1]),
+                ]
+            })
+            .collect(),
+    }
+}
+
 /// The counts of [`check_observations`] on a graph.
-fn check_graph(g: &Graph) -> Result<()> {
+pub(crate) fn check_graph(g: &Graph) -> Result<()> {
     if g.n_cams < 2 {
         return Err(Error::TooFew {
             what: "frames for a projective reconstruction",

@@ -1,0 +1,326 @@
+//! Perspective reconstruction of long sequences ([`fit_observations`]): metric windows of
+//! frames, chained by similarities, then one sparse metric bundle adjustment.
+//!
+//! Why not the projective chain and one self-calibration: a long projective chain is
+//! consistent only up to a slowly varying homography until its bundle adjustment has
+//! converged (which takes a growing number of solves, docs/results.md), and the absolute
+//! dual quadric of all its cameras then fits none of them well — on a 1 000-frame corridor
+//! the metric start was 4 px RMS and the metric adjustment stalled at 1.6–1.9 px with the
+//! structure lost. A metric window is small and consistent, a similarity between two of
+//! them has 7 degrees of freedom that the shared tracks fix, and the chain of similarities
+//! is what the scaled orthographic sparse pipeline does (docs/math.md §13).
+
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+use super::{
+    Intrinsics, Loss, PerspectiveConfig, PerspectiveFit, PerspectiveModel, adjust_graph,
+    assumed_frame_of,
+};
+use crate::error::{Error, Result};
+use crate::projective::windowed::{self, WindowConfig};
+use crate::projective::{self, AffineStart, Normalization, Observation, ProjectiveConfig};
+use crate::{Measurements, NoopObserver, Observer};
+
+/// One window's metric fit (normalised units of the sequence's graph).
+struct Window {
+    start: usize,
+    end: usize,
+    tracks: Vec<usize>,
+    meas: Measurements,
+    fit: Option<PerspectiveModel>,
+}
+
+/// Perspective reconstruction of a sparse table of observations (`n_frames` frames,
+/// `n_tracks` tracks), for long sequences: nothing is `O(F·N)` or `O(F²)`.
+///
+/// Objective: as [`super::fit`], the robust reprojection error in pixels over the observed
+/// entries, `Σ ρ(‖π(K, R_f, t_f, X_p) − w_fp‖²)`, one focal length for the sequence
+/// (given, or estimated) and the principal point at the image centre (or given).
+///
+/// 1. Overlapping windows of frames ([`WindowConfig`]: 40, overlap 20), each fitted on its
+///    own and in parallel: affine completion, projective factorization
+///    ([`projective::fit`], its adjustment capped at
+///    [`PerspectiveConfig::projective_iterations`]), self-calibration and metric bundle
+///    adjustment ([`super::fit`]).
+/// 2. Unless the focal length is given, the median of the windows' focal lengths is the
+///    sequence's, and every window is adjusted again with it held fixed (windows with
+///    their own focal lengths would not chain into one metric frame).
+/// 3. The windows are chained by the similarity (Umeyama, no reflection: the perspective
+///    camera has no depth reversal) that carries their points onto the tracks already
+///    placed, anchored on the tracks seen in ≥ [`WindowConfig::min_anchor_observations`]
+///    frames of both windows. A window that does not fit (shared points off by more than
+///    10 % of their spread) is skipped when the next window covers its frames.
+/// 4. One metric bundle adjustment of everything ([`super::adjust`]'s, on the sparse
+///    camera–point graph), the focal length free unless given.
+///
+/// Cost: the windows `O(F)` small dense fits (two per window when the focal length is
+/// estimated); each adjustment iteration `O(n_obs + F b² c³)` for a half-bandwidth of `b`
+/// frames and `c` = 6 parameters per camera; memory linear in the observations (the
+/// windows' dense measurements are `O(n_obs · window)` in total).
+///
+/// Returns the perspective fit; its `starts` is empty and its `selfcal` `None` (each
+/// window has its own). Errors: [`Error::InvalidConfig`], [`Error::Degenerate`] and
+/// [`Error::TooFew`] as [`projective::fit_observations`] for the table;
+/// [`Error::Degenerate`] when no window fits, or a frame is covered by no window that fits.
+pub fn fit_observations(
+    obs: &[Observation],
+    n_frames: usize,
+    n_tracks: usize,
+    cfg: &PerspectiveConfig,
+    projective_cfg: &ProjectiveConfig,
+    windows: &WindowConfig,
+    observer: &mut dyn Observer,
+) -> Result<PerspectiveFit> {
+    cfg.validate()?;
+    projective_cfg.validate()?;
+    let order = projective::observation_order(obs, n_frames, n_tracks)?;
+    let assumed = assumed_frame_of(obs.iter().map(|o| o.xy), &cfg.intrinsics);
+    let s = assumed.scale;
+    let norm = Normalization {
+        centre: assumed.principal_point,
+        scale: 1.0 / s,
+    };
+    let g = projective::observation_graph(obs, &order, n_frames, n_tracks, &norm);
+    drop(order);
+    projective::check_graph(&g)?;
+    let t0 = std::time::Instant::now();
+    observer.on_event(&crate::Event::StageStarted { stage: "windows" });
+    let mut list = Vec::new();
+    windowed::for_each_window(&g, windows, |start, end, tracks, meas| {
+        list.push(Window {
+            start,
+            end,
+            tracks: tracks.to_vec(),
+            meas: meas.clone(),
+            fit: None,
+        });
+        Ok(())
+    })?;
+    // Window settings in the graph's normalised units: principal point 0, scale 1.
+    let window_cfg = |focal: Option<f64>| PerspectiveConfig {
+        intrinsics: Intrinsics {
+            focal_px: focal,
+            principal_point: Some([0.0, 0.0]),
+            image_size: None,
+        },
+        per_frame_focal: false,
+        estimate_principal_point: false,
+        distortion: false,
+        loss: match cfg.loss {
+            Loss::Squared => Loss::Squared,
+            Loss::Huber(d) => Loss::Huber(d / s),
+            Loss::Cauchy(d) => Loss::Cauchy(d / s),
+        },
+        ..cfg.clone()
+    };
+    let known = cfg.intrinsics.focal_px.map(|f| f / s);
+    let first_cfg = window_cfg(known);
+    let fits: Vec<Option<PerspectiveModel>> = list
+        .par_iter()
+        .map(|w| fit_window(w, windows, projective_cfg, &first_cfg).ok())
+        .collect();
+    for (w, f) in list.iter_mut().zip(fits) {
+        w.fit = f;
+    }
+    let focal = match known {
+        Some(f) => f,
+        None => {
+            let mut f: Vec<f64> = list
+                .iter()
+                .filter_map(|w| w.fit.as_ref().map(|m| m.focal_px[0]))
+                .filter(|f| f.is_finite() && *f > 0.0)
+                .collect();
+            if f.is_empty() {
+                return Err(Error::Degenerate(
+                    "no window of frames could be reconstructed in perspective".into(),
+                ));
+            }
+            f.sort_by(f64::total_cmp);
+            let median = f[f.len() / 2];
+            // Every window again with the sequence's focal length.
+            let fixed = window_cfg(Some(median));
+            let refits: Vec<Option<PerspectiveModel>> = list
+                .par_iter()
+                .map(|w| match &w.fit {
+                    Some(m) => super::adjust(&w.meas, m, &fixed, 0, &mut NoopObserver)
+                        .ok()
+                        .map(|r| r.model),
+                    None => fit_window(w, windows, projective_cfg, &fixed).ok(),
+                })
+                .collect();
+            for (w, f) in list.iter_mut().zip(refits) {
+                w.fit = f;
+            }
+            median
+        }
+    };
+    let (rotations, translations, mut points, placed) = chain(&list, n_frames, n_tracks, windows)?;
+    drop(list);
+    place_unplaced(&g, focal, &rotations, &translations, &mut points, &placed);
+    let seconds = t0.elapsed().as_secs_f64();
+    observer.on_event(&crate::Event::StageFinished {
+        stage: "windows",
+        seconds,
+    });
+    let start = PerspectiveModel {
+        focal_px: vec![focal * s; n_frames],
+        principal_point: assumed.principal_point,
+        k1: 0.0,
+        rotations,
+        translations,
+        points,
+    };
+    let estimate_pp = cfg.estimates_principal_point(&assumed);
+    let mut out = adjust_graph(&g, start, cfg, &assumed, estimate_pp, 0, observer)?;
+    out.stages.insert(
+        0,
+        projective::StageReport {
+            stage: "windows".into(),
+            status: crate::SolverStatus::Converged,
+            iterations: n_frames.div_ceil((windows.window - windows.overlap).max(1)),
+            rms_before_px: f64::NAN,
+            rms_after_px: f64::NAN,
+            seconds,
+        },
+    );
+    Ok(out)
+}
+
+/// A window's metric fit from scratch (normalised units; `cfg` its settings).
+fn fit_window(
+    w: &Window,
+    windows: &WindowConfig,
+    projective_cfg: &ProjectiveConfig,
+    cfg: &PerspectiveConfig,
+) -> Result<PerspectiveModel> {
+    let c = windowed::complete_window(w.start, w.end, &w.tracks, &w.meas, windows)?;
+    let pcfg = ProjectiveConfig {
+        refine: crate::projective::bundle::LmConfig {
+            max_iterations: cfg.projective_iterations,
+            ..projective_cfg.refine.clone()
+        },
+        ..projective_cfg.clone()
+    };
+    let proj = projective::fit(
+        &w.meas,
+        AffineStart {
+            m: c.m.as_ref(),
+            s: c.s.as_ref(),
+            t: &c.t,
+        },
+        &pcfg,
+        0,
+        &mut NoopObserver,
+    )?;
+    Ok(super::fit(&w.meas, &proj.model, None, cfg, 0, &mut NoopObserver)?.model)
+}
+
+type Chained = (
+    Vec<Matrix3<f64>>,
+    Vec<Vector3<f64>>,
+    Vec<Vector3<f64>>,
+    Vec<bool>,
+);
+
+/// Chains the fitted windows into window 0's frame (see [`fit_observations`], step 3):
+/// rotations, translations, points and which points a window placed. `O(n_obs)`.
+fn chain(list: &[Window], nf: usize, np: usize, cfg: &WindowConfig) -> Result<Chained> {
+    let mut rotations = vec![Matrix3::identity(); nf];
+    let mut translations = vec![Vector3::zeros(); nf];
+    let mut cam_done = vec![false; nf];
+    let mut points = vec![Vector3::zeros(); np];
+    let mut placed = vec![false; np];
+    let mut placed_n = vec![0usize; np];
+    let mut first = true;
+    let mut skipped = 0;
+    for (wi, w) in list.iter().enumerate() {
+        let seen = windowed::seen_in_window(&w.meas, w.tracks.len());
+        // X_glob = sc · A x + b.
+        let map = w.fit.as_ref().and_then(|m| {
+            if first {
+                return Some((1.0, Matrix3::identity(), Vector3::zeros()));
+            }
+            let shared = windowed::anchors(&w.tracks, &placed, &seen, &placed_n, cfg);
+            if shared.len() < 4 {
+                return None;
+            }
+            let est: Vec<_> = shared.iter().map(|&k| m.points[k]).collect();
+            let glob: Vec<_> = shared.iter().map(|&k| points[w.tracks[k]]).collect();
+            crate::eval::align_similarity(&est, &glob, false)
+                .filter(|a| a.relative_rms <= 0.1)
+                .map(|a| (a.scale, a.rotation, a.translation))
+        });
+        let (Some((sc, a, b)), Some(m)) = (map, w.fit.as_ref()) else {
+            skipped += 1;
+            let first_new = (w.start..w.end).find(|&f| !cam_done[f]).unwrap_or(w.end);
+            if first || list.get(wi + 1).is_none_or(|n| n.start > first_new) {
+                return Err(Error::Degenerate(format!(
+                    "frames {}..{}: the window's perspective reconstruction failed or does \
+                     not fit the frames before it, and no later window covers frame {first_new}",
+                    w.start, w.end
+                )));
+            }
+            continue;
+        };
+        for f in w.start..w.end {
+            if cam_done[f] {
+                continue;
+            }
+            // X_c = R x + t with x = Aᵀ (X − b) / sc; scaled by sc (same projection):
+            // R' = R Aᵀ, t' = sc t − R' b.
+            let r = m.rotations[f - w.start] * a.transpose();
+            translations[f] = m.translations[f - w.start] * sc - r * b;
+            rotations[f] = r;
+            cam_done[f] = true;
+        }
+        for (k, &p) in w.tracks.iter().enumerate() {
+            if !placed[p] {
+                points[p] = a * m.points[k] * sc + b;
+                placed[p] = true;
+                placed_n[p] = seen[k];
+            }
+        }
+        first = false;
+    }
+    if let Some(f) = cam_done.iter().position(|d| !d) {
+        return Err(Error::Degenerate(format!(
+            "frame {f}: no window of frames around it could be reconstructed \
+             ({skipped} window(s) skipped)"
+        )));
+    }
+    Ok((rotations, translations, points, placed))
+}
+
+/// Tracks no window placed (seen in fewer than 2 frames of every window: re-acquired far
+/// apart) start on the ray of their first observation, at the median depth of the placed
+/// points in frame 0; the adjustment's point solve then moves them. `O(n_obs)`.
+fn place_unplaced(
+    g: &projective::bundle::Graph,
+    focal: f64,
+    rotations: &[Matrix3<f64>],
+    translations: &[Vector3<f64>],
+    points: &mut [Vector3<f64>],
+    placed: &[bool],
+) {
+    if placed.iter().all(|&p| p) {
+        return;
+    }
+    let mut depths: Vec<f64> = (0..g.n_pts)
+        .filter(|&p| placed[p] && g.track(p).next().is_some_and(|o| g.cam[o] == 0))
+        .map(|p| (rotations[0] * points[p] + translations[0])[2])
+        .filter(|z| z.is_finite() && *z > 0.0)
+        .collect();
+    depths.sort_by(f64::total_cmp);
+    let depth = depths.get(depths.len() / 2).copied().unwrap_or(1.0);
+    for p in 0..g.n_pts {
+        if placed[p] {
+            continue;
+        }
+        let Some(o) = g.track(p).next() else { continue };
+        let f = g.cam[o];
+        let ray = Vector3::new(g.w[o][0] / focal, g.w[o][1] / focal, 1.0) * depth;
+        // X = Rᵀ (X_c − t).
+        points[p] = rotations[f].transpose() * (ray - translations[f]);
+    }
+}
