@@ -457,7 +457,7 @@ impl PerspectiveResult {
         kept_tracks: &[usize],
         used_tracks: &[usize],
     ) -> Self {
-        let model = pf.model;
+        let model = &pf.model;
         let nf = model.rotations.len();
         let outlier_points: Vec<Vector3<f64>> = ProjectiveModel {
             cameras: (0..nf).map(|f| model.camera_matrix(f)).collect(),
@@ -471,18 +471,8 @@ impl PerspectiveResult {
         let outliers = |f: usize, k: usize| model.project_point(f, &outlier_points[k]);
         let cameras = (0..nf)
             .map(|f| {
-                let (ss, n) = frame_residuals(&fitted, meas, f);
-                let r = model.rotations[f];
-                let (t, c) = (model.translations[f], model.centre(f));
-                PerspectiveFrame {
-                    frame: fit.frame_ids()[f].clone(),
-                    rotation: std::array::from_fn(|a| std::array::from_fn(|b| r[(a, b)])),
-                    translation: [t[0], t[1], t[2]],
-                    centre: [c[0], c[1], c[2]],
-                    focal_px: model.focal_px[f],
-                    rms_px: rms_of(ss, n),
-                    n_observations: n,
-                }
+                let res = frame_residuals(&fitted, meas, f);
+                Self::frame(model, f, fit.frame_ids()[f].clone(), res)
             })
             .collect();
         let points = point_results(
@@ -498,6 +488,44 @@ impl PerspectiveResult {
             (&fitted, |p| model.points[p]),
             (&outliers, |k| outlier_points[k]),
         );
+        let downweighted = pf
+            .downweighted
+            .iter()
+            .map(|&(f, p)| (fit.frame_ids()[f].clone(), fit.track_ids()[p].clone()))
+            .collect();
+        Self::assemble(pf, cfg, cameras, points, downweighted, outlier_points)
+    }
+
+    /// Frame `f`'s block: its pose, focal length and residuals `(Σ r², observations)`.
+    fn frame(
+        model: &perspective::PerspectiveModel,
+        f: usize,
+        id: Id,
+        res: (f64, usize),
+    ) -> PerspectiveFrame {
+        let r = model.rotations[f];
+        let (t, c) = (model.translations[f], model.centre(f));
+        PerspectiveFrame {
+            frame: id,
+            rotation: std::array::from_fn(|a| std::array::from_fn(|b| r[(a, b)])),
+            translation: [t[0], t[1], t[2]],
+            centre: [c[0], c[1], c[2]],
+            focal_px: model.focal_px[f],
+            rms_px: rms_of(res.0, res.1),
+            n_observations: res.1,
+        }
+    }
+
+    /// The result from its parts: the intrinsics block and the fit's reports.
+    fn assemble(
+        pf: perspective::PerspectiveFit,
+        cfg: &PerspectiveConfig,
+        cameras: Vec<PerspectiveFrame>,
+        points: Vec<PointResult>,
+        downweighted: Vec<(Id, Id)>,
+        outlier_points: Vec<Vector3<f64>>,
+    ) -> Self {
+        let model = pf.model;
         let mut focals = model.focal_px.clone();
         focals.sort_by(f64::total_cmp);
         let k0 = model.k(0);
@@ -520,11 +548,6 @@ impl PerspectiveResult {
             k1: model.k1,
             image_size: cfg.intrinsics.image_size,
         };
-        let downweighted = pf
-            .downweighted
-            .iter()
-            .map(|&(f, p)| (fit.frame_ids()[f].clone(), fit.track_ids()[p].clone()))
-            .collect();
         Self {
             rms_px: pf.rms_px,
             intrinsics,
@@ -538,6 +561,108 @@ impl PerspectiveResult {
             model,
             outlier_points,
         }
+    }
+}
+
+impl PerspectiveResult {
+    /// The result of the sparse path ([`perspective::fit_observations`] on the `inl`
+    /// tracks of `kept`, renumbered `0..inl.len()`): per-frame and per-track residuals from
+    /// the table's rows, the outlier tracks (`out`) triangulated from the fitted cameras.
+    /// `O(observations)`.
+    fn from_sparse(
+        pf: perspective::PerspectiveFit,
+        cfg: &PerspectiveConfig,
+        kept: &TrackTable,
+        inl: &[usize],
+        out: &[usize],
+    ) -> Self {
+        let model = &pf.model;
+        let nf = model.rotations.len();
+        // Kept track → (inlier index | outlier index).
+        let mut slot = vec![(usize::MAX, usize::MAX); kept.n_tracks()];
+        for (j, &p) in inl.iter().enumerate() {
+            slot[p].0 = j;
+        }
+        for (k, &p) in out.iter().enumerate() {
+            slot[p].1 = k;
+        }
+        let outlier_obs: Vec<projective::Observation> = (0..nf)
+            .flat_map(|f| {
+                let slot = &slot;
+                kept.frame_row(f)
+                    .entries()
+                    .iter()
+                    .filter(move |e| slot[e.track as usize].1 != usize::MAX)
+                    .map(move |e| projective::Observation {
+                        frame: f,
+                        track: slot[e.track as usize].1,
+                        xy: [e.x, e.y],
+                    })
+            })
+            .collect();
+        let outlier_points: Vec<Vector3<f64>> = ProjectiveModel {
+            cameras: (0..nf).map(|f| model.camera_matrix(f)).collect(),
+            points: Vec::new(),
+        }
+        .triangulate_observations(&outlier_obs, out.len())
+        .unwrap_or_else(|_| vec![[f64::NAN; 4]; out.len()])
+        .iter()
+        .map(|x| Vector3::new(x[0] / x[3], x[1] / x[3], x[2] / x[3]))
+        .collect();
+        drop(outlier_obs);
+        let mut frame_ss = vec![(0.0, 0usize); nf];
+        let mut track_ss = vec![(0.0, 0usize); kept.n_tracks()];
+        for (f, fs) in frame_ss.iter_mut().enumerate() {
+            for e in kept.frame_row(f).entries() {
+                let p = e.track as usize;
+                let (j, k) = slot[p];
+                let q = if j != usize::MAX {
+                    model.project(f, j)
+                } else {
+                    model.project_point(f, &outlier_points[k])
+                };
+                let d2 = (q[0] - e.x).powi(2) + (q[1] - e.y).powi(2);
+                if d2.is_finite() {
+                    track_ss[p].0 += d2;
+                    track_ss[p].1 += 1;
+                    if j != usize::MAX {
+                        fs.0 += d2;
+                        fs.1 += 1;
+                    }
+                }
+            }
+        }
+        let cameras = (0..nf)
+            .map(|f| Self::frame(model, f, kept.frame_ids()[f].clone(), frame_ss[f]))
+            .collect();
+        let points = (0..kept.n_tracks())
+            .map(|p| {
+                let (j, k) = slot[p];
+                let x = if j != usize::MAX {
+                    model.points[j]
+                } else {
+                    outlier_points[k]
+                };
+                PointResult {
+                    track: kept.track_ids()[p].clone(),
+                    xyz: [x[0], x[1], x[2]],
+                    inlier: j != usize::MAX,
+                    rms_px: rms_of(track_ss[p].0, track_ss[p].1),
+                    n_observations: track_ss[p].1,
+                }
+            })
+            .collect();
+        let downweighted = pf
+            .downweighted
+            .iter()
+            .map(|&(f, j)| {
+                (
+                    kept.frame_ids()[f].clone(),
+                    kept.track_ids()[inl[j]].clone(),
+                )
+            })
+            .collect();
+        Self::assemble(pf, cfg, cameras, points, downweighted, outlier_points)
     }
 }
 
@@ -752,8 +877,10 @@ pub struct Reconstruction {
     pub warnings: Vec<String>,
     pub timings: Vec<StageTime>,
     /// Present when the sparse pipeline ran ([`crate::sparse`]): the table's dense matrix
-    /// did not fit, or it was asked for. The dense-only stages (RANSAC robust pass,
-    /// σ4/σ3, refinement, projective and perspective cameras, completed.txt) did not run.
+    /// did not fit, it is a long sequence of short tracks, or it was asked for. The
+    /// dense-only stages (RANSAC robust pass, σ4/σ3, refinement, the projective camera,
+    /// completed.txt) did not run; the perspective camera runs on the sparse path
+    /// ([`crate::perspective::fit_observations`]).
     pub sparse: Option<crate::sparse::SparseReport>,
     /// Present when a textured surface was built ([`crate::mesh`]; `rank3 run`, or
     /// `reconstruct --images`): its triangulation, texture and timing report.
@@ -2192,15 +2319,12 @@ fn sparse_reason(kept: &TrackTable, config: &Config) -> Result<Option<String>> {
         ))),
         // A long table whose tracks are short (a video): the dense pipeline's RANSAC pass
         // needs tracks that span the sequence and finds no rigid majority, and its affine
-        // completion drifts (docs/math.md §13). The projective and perspective cameras
-        // exist only in the dense pipeline.
+        // completion drifts (docs/math.md §13). The projective camera exists only in the
+        // dense pipeline.
         Pipeline::Auto
             if f >= BANDED_MIN_FRAMES
                 && kept.fill() < BANDED_MAX_FILL
-                && !matches!(
-                    config.camera,
-                    CameraModel::Projective | CameraModel::Perspective
-                ) =>
+                && config.camera != CameraModel::Projective =>
         {
             Ok(Some(format!(
                 "a long sequence of short tracks ({f} frames, {:.1} % filled): the dense \
@@ -2238,7 +2362,7 @@ fn sparse_reconstruction(
     } = kept;
     let mut warnings = vec![format!(
         "sparse pipeline: {reason}; the dense-only stages (RANSAC robust pass, σ4/σ3, metric \
-         refinement, projective and perspective cameras, completed.txt) do not run"
+         refinement, the projective camera, completed.txt) do not run"
     )];
     let affine_camera = config.camera.affine();
     let t0 = Instant::now();
@@ -2275,6 +2399,83 @@ fn sparse_reconstruction(
         (s + track_res[p].0, n + track_res[p].1)
     });
     let metric_rms_px = rms_of(ss, n);
+    // The perspective camera on the sparse path (perspective::fit_observations), asked for
+    // or tried by the automatic choice, on the tracks the scaled orthographic fit kept.
+    let mut camera_model = affine_camera;
+    let mut model_selection = None;
+    let mut perspective = None;
+    if config.camera.is_perspective() {
+        let mut slot = vec![usize::MAX; kept.n_tracks()];
+        for (j, &p) in inl.iter().enumerate() {
+            slot[p] = j;
+        }
+        let obs: Vec<projective::Observation> = (0..nf)
+            .flat_map(|f| {
+                let slot = &slot;
+                kept.frame_row(f)
+                    .entries()
+                    .iter()
+                    .filter(move |e| slot[e.track as usize] != usize::MAX)
+                    .map(move |e| projective::Observation {
+                        frame: f,
+                        track: slot[e.track as usize],
+                        xy: [e.x, e.y],
+                    })
+            })
+            .collect();
+        let n_obs = obs.len();
+        let per = timer.run("perspective", |o| {
+            perspective::fit_observations(
+                &obs,
+                nf,
+                inl.len(),
+                &config.perspective,
+                &config.projective,
+                &config.sparse.window,
+                o,
+            )
+        });
+        drop(obs);
+        let per = match per {
+            Ok(p) => Some(p),
+            Err(e) if config.camera == CameraModel::Auto => {
+                warnings.push(format!(
+                    "the perspective camera could not be fitted ({e}); the scaled orthographic \
+                     camera is kept"
+                ));
+                None
+            }
+            Err(e) => return Err(e),
+        };
+        let result = per.map(|pf| {
+            if pf.report.status != SolverStatus::Converged {
+                warnings.push(format!(
+                    "perspective bundle adjustment ended with status {:?} after {} iterations",
+                    pf.report.status, pf.report.iterations
+                ));
+            }
+            if pf.in_front < 0.95 {
+                warnings.push(format!(
+                    "only {:.1} % of the observations are in front of their camera: the \
+                     perspective reconstruction is unreliable (weak perspective or degenerate \
+                     motion)",
+                    100.0 * pf.in_front
+                ));
+            }
+            PerspectiveResult::from_sparse(pf, &config.perspective, kept, &inl, &out)
+        });
+        if config.camera == CameraModel::Auto {
+            let sel = ModelSelection::judge(metric_rms_px, result.as_ref(), n_obs, nf, inl.len());
+            camera_model = sel.chosen;
+            if sel.chosen == CameraModel::Perspective {
+                perspective = result;
+            }
+            model_selection = Some(sel);
+        } else {
+            camera_model = CameraModel::Perspective;
+            perspective = result;
+        }
+    }
     let frames: Vec<FrameResult> = (0..nf)
         .map(|f| {
             let r = all.rotations[f].matrix();
@@ -2344,11 +2545,11 @@ fn sparse_reconstruction(
     let affine_structure = Mat::from_fn(3, inl.len(), |k, j| all.points[inl[j]][k]);
     let seconds = t0.elapsed().as_secs_f64();
     Ok(Reconstruction {
-        camera_model: affine_camera,
-        model_selection: None,
+        camera_model,
+        model_selection,
         frames,
         points,
-        rms_px: metric_rms_px,
+        rms_px: perspective.as_ref().map_or(metric_rms_px, |p| p.rms_px),
         metric_rms_px,
         metric_upgrade: upgrade,
         singular_values: Vec::new(),
@@ -2364,7 +2565,7 @@ fn sparse_reconstruction(
         robust,
         refinement: None,
         projective: None,
-        perspective: None,
+        perspective,
         input: InputSummary {
             frames: table.n_frames(),
             tracks: table.n_tracks(),

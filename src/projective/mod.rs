@@ -215,7 +215,24 @@ impl ProjectiveModel {
     /// error. Tracks seen in fewer than 2 frames get NaN. `O(observations)`.
     pub fn triangulate(&self, meas: &Measurements) -> Vec<[f64; 4]> {
         let norm = Normalization::of(meas);
-        let g = graph(meas, &norm);
+        self.triangulate_graph(&graph(meas, &norm), &norm)
+    }
+
+    /// [`Self::triangulate`] for a list of observations of `n_tracks` tracks in this
+    /// model's frames (sparse: `O(observations)` time and memory). Errors as
+    /// [`fit_observations`] for indices out of range, non-finite or repeated entries.
+    pub fn triangulate_observations(
+        &self,
+        obs: &[Observation],
+        n_tracks: usize,
+    ) -> Result<Vec<[f64; 4]>> {
+        let order = observation_order(obs, self.cameras.len(), n_tracks)?;
+        let norm = Normalization::of_points(|| obs.iter().map(|o| o.xy));
+        let g = observation_graph(obs, &order, self.cameras.len(), n_tracks, &norm);
+        Ok(self.triangulate_graph(&g, &norm))
+    }
+
+    fn triangulate_graph(&self, g: &Graph, norm: &Normalization) -> Vec<[f64; 4]> {
         let cams: Vec<f64> = self
             .cameras
             .iter()
@@ -225,13 +242,13 @@ impl ProjectiveModel {
                 n
             })
             .collect();
-        let mut pts = vec![0.0; 4 * meas.n_points()];
-        for p in 0..meas.n_points() {
-            let x = dlt_point(&g, &cams, p);
+        let mut pts = vec![0.0; 4 * g.n_pts];
+        for p in 0..g.n_pts {
+            let x = dlt_point(g, &cams, p);
             pts[4 * p..4 * p + 4].copy_from_slice(&x);
         }
-        bundle::solve_points(&models::Projective, &g, &cams, &[], &mut pts, 20);
-        (0..meas.n_points())
+        bundle::solve_points(&models::Projective, g, &cams, &[], &mut pts, 20);
+        (0..g.n_pts)
             .map(|p| {
                 if g.track(p).len() < 2 {
                     [f64::NAN; 4]
