@@ -2320,11 +2320,16 @@ fn sparse_reason(kept: &TrackTable, config: &Config) -> Result<Option<String>> {
         // A long table whose tracks are short (a video): the dense pipeline's RANSAC pass
         // needs tracks that span the sequence and finds no rigid majority, and its affine
         // completion drifts (docs/math.md §13). The projective camera exists only in the
-        // dense pipeline.
+        // dense pipeline; the perspective camera asked for keeps the dense pipeline while
+        // the table fits it (its sparse path, which `auto` tries, chains windows and can
+        // fail where the dense one does not).
         Pipeline::Auto
             if f >= BANDED_MIN_FRAMES
                 && kept.fill() < BANDED_MAX_FILL
-                && config.camera != CameraModel::Projective =>
+                && !matches!(
+                    config.camera,
+                    CameraModel::Projective | CameraModel::Perspective
+                ) =>
         {
             Ok(Some(format!(
                 "a long sequence of short tracks ({f} frames, {:.1} % filled): the dense \
@@ -2436,16 +2441,16 @@ fn sparse_reconstruction(
             )
         });
         drop(obs);
+        // Nothing is lost when it fails: the scaled orthographic result stands, and says why.
         let per = match per {
             Ok(p) => Some(p),
-            Err(e) if config.camera == CameraModel::Auto => {
+            Err(e) => {
                 warnings.push(format!(
-                    "the perspective camera could not be fitted ({e}); the scaled orthographic \
-                     camera is kept"
+                    "the perspective camera could not be fitted on the sparse path ({e}); the \
+                     scaled orthographic camera is kept"
                 ));
                 None
             }
-            Err(e) => return Err(e),
         };
         let result = per.map(|pf| {
             if pf.report.status != SolverStatus::Converged {
@@ -2471,7 +2476,7 @@ fn sparse_reconstruction(
                 perspective = result;
             }
             model_selection = Some(sel);
-        } else {
+        } else if result.is_some() {
             camera_model = CameraModel::Perspective;
             perspective = result;
         }

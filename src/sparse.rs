@@ -608,11 +608,27 @@ impl SparseProblem {
 }
 
 /// One window's metric reconstruction: per local frame `(R, s, t)`, per track its point.
-struct MetricWindow {
+pub(crate) struct MetricWindow {
     cameras: Vec<(Rotation3<f64>, f64, [f64; 2])>,
     points: Vec<Vector3<f64>>,
     /// The window's affine completion.
-    affine: crate::completion::Completion,
+    pub(crate) affine: crate::completion::Completion,
+}
+
+impl MetricWindow {
+    /// The window's scaled orthographic model (its own frame and units).
+    pub(crate) fn model(&self) -> MetricModel {
+        MetricModel {
+            rotations: self.cameras.iter().map(|c| c.0).collect(),
+            translations: self
+                .cameras
+                .iter()
+                .map(|c| nalgebra::Vector2::new(c.2[0], c.2[1]))
+                .collect(),
+            scales: self.cameras.iter().map(|c| c.1).collect(),
+            points: self.points.clone(),
+        }
+    }
 }
 
 /// The chained-window start of [`SparseProblem::start`] on a graph (see there).
@@ -838,7 +854,7 @@ fn affine_bridge(
 }
 
 /// Completes a window and upgrades it to metric on its own.
-fn metric_window(
+pub(crate) fn metric_window(
     start: usize,
     end: usize,
     tracks: &[usize],

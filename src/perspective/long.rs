@@ -28,7 +28,8 @@ struct Window {
     end: usize,
     tracks: Vec<usize>,
     meas: Measurements,
-    fit: Option<PerspectiveModel>,
+    /// The window's metric model, or why it has none.
+    fit: std::result::Result<PerspectiveModel, String>,
 }
 
 /// Perspective reconstruction of a sparse table of observations (`n_frames` frames,
@@ -39,10 +40,11 @@ struct Window {
 /// (given, or estimated) and the principal point at the image centre (or given).
 ///
 /// 1. Overlapping windows of frames ([`WindowConfig`]: 40, overlap 20), each fitted on its
-///    own and in parallel: affine completion, projective factorization
-///    ([`projective::fit`], its adjustment capped at
-///    [`PerspectiveConfig::projective_iterations`]), self-calibration and metric bundle
-///    adjustment ([`super::fit`]).
+///    own and in parallel: affine completion and its scaled orthographic upgrade,
+///    projective factorization ([`projective::fit`], its adjustment capped at
+///    [`PerspectiveConfig::projective_iterations`]), then [`super::fit`]'s starts (the
+///    self-calibration, and the scaled orthographic model lifted at the focal lengths of
+///    [`PerspectiveConfig::focal_grid`], mirrored or not) screened and the best adjusted.
 /// 2. Unless the focal length is given, the median of the windows' focal lengths is the
 ///    sequence's, and every window is adjusted again with it held fixed (windows with
 ///    their own focal lengths would not chain into one metric frame).
@@ -93,7 +95,7 @@ pub fn fit_observations(
             end,
             tracks: tracks.to_vec(),
             meas: meas.clone(),
-            fit: None,
+            fit: Err("not fitted".into()),
         });
         Ok(())
     })?;
@@ -116,9 +118,9 @@ pub fn fit_observations(
     };
     let known = cfg.intrinsics.focal_px.map(|f| f / s);
     let first_cfg = window_cfg(known);
-    let fits: Vec<Option<PerspectiveModel>> = list
+    let fits: Vec<_> = list
         .par_iter()
-        .map(|w| fit_window(w, windows, projective_cfg, &first_cfg).ok())
+        .map(|w| fit_window(w, windows, projective_cfg, &first_cfg).map_err(|e| e.to_string()))
         .collect();
     for (w, f) in list.iter_mut().zip(fits) {
         w.fit = f;
@@ -128,7 +130,7 @@ pub fn fit_observations(
         None => {
             let mut f: Vec<f64> = list
                 .iter()
-                .filter_map(|w| w.fit.as_ref().map(|m| m.focal_px[0]))
+                .filter_map(|w| w.fit.as_ref().ok().map(|m| m.focal_px[0]))
                 .filter(|f| f.is_finite() && *f > 0.0)
                 .collect();
             if f.is_empty() {
@@ -140,15 +142,17 @@ pub fn fit_observations(
             let median = f[f.len() / 2];
             // Every window again with the sequence's focal length.
             let fixed = window_cfg(Some(median));
-            let refits: Vec<Option<PerspectiveModel>> = list
-                .par_iter()
-                .map(|w| match &w.fit {
-                    Some(m) => super::adjust(&w.meas, m, &fixed, 0, &mut NoopObserver)
-                        .ok()
-                        .map(|r| r.model),
-                    None => fit_window(w, windows, projective_cfg, &fixed).ok(),
-                })
-                .collect();
+            let refits: Vec<_> =
+                list.par_iter()
+                    .map(|w| {
+                        match &w.fit {
+                            Ok(m) => super::adjust(&w.meas, m, &fixed, 0, &mut NoopObserver)
+                                .map(|r| r.model),
+                            Err(_) => fit_window(w, windows, projective_cfg, &fixed),
+                        }
+                        .map_err(|e| e.to_string())
+                    })
+                    .collect();
             for (w, f) in list.iter_mut().zip(refits) {
                 w.fit = f;
             }
@@ -194,7 +198,15 @@ fn fit_window(
     projective_cfg: &ProjectiveConfig,
     cfg: &PerspectiveConfig,
 ) -> Result<PerspectiveModel> {
-    let c = windowed::complete_window(w.start, w.end, &w.tracks, &w.meas, windows)?;
+    let mw = crate::sparse::metric_window(
+        w.start,
+        w.end,
+        &w.tracks,
+        &w.meas,
+        windows,
+        crate::CameraModel::ScaledOrthographic,
+    )?;
+    let c = &mw.affine;
     let pcfg = ProjectiveConfig {
         refine: crate::projective::bundle::LmConfig {
             max_iterations: cfg.projective_iterations,
@@ -213,7 +225,19 @@ fn fit_window(
         0,
         &mut NoopObserver,
     )?;
-    Ok(super::fit(&w.meas, &proj.model, None, cfg, 0, &mut NoopObserver)?.model)
+    // The starts of super::fit: the self-calibration, and the window's scaled orthographic
+    // model lifted at several focal lengths, mirrored or not (the self-calibration of a
+    // window with weak perspective can land on the depth-reversed reconstruction).
+    let affine = mw.model();
+    Ok(super::fit(
+        &w.meas,
+        &proj.model,
+        Some(&affine),
+        cfg,
+        0,
+        &mut NoopObserver,
+    )?
+    .model)
 }
 
 type Chained = (
@@ -237,32 +261,45 @@ fn chain(list: &[Window], nf: usize, np: usize, cfg: &WindowConfig) -> Result<Ch
     for (wi, w) in list.iter().enumerate() {
         let seen = windowed::seen_in_window(&w.meas, w.tracks.len());
         // X_glob = sc · A x + b.
-        let map = w.fit.as_ref().and_then(|m| {
+        let map = w.fit.clone().and_then(|m| {
             if first {
-                return Some((1.0, Matrix3::identity(), Vector3::zeros()));
+                return Ok((1.0, Matrix3::identity(), Vector3::zeros(), m));
             }
             let shared = windowed::anchors(&w.tracks, &placed, &seen, &placed_n, cfg);
             if shared.len() < 4 {
-                return None;
+                return Err(format!(
+                    "{} track(s) shared with the frames before it (4 needed)",
+                    shared.len()
+                ));
             }
             let est: Vec<_> = shared.iter().map(|&k| m.points[k]).collect();
             let glob: Vec<_> = shared.iter().map(|&k| points[w.tracks[k]]).collect();
-            crate::eval::align_similarity(&est, &glob, false)
-                .filter(|a| a.relative_rms <= 0.1)
-                .map(|a| (a.scale, a.rotation, a.translation))
-        });
-        let (Some((sc, a, b)), Some(m)) = (map, w.fit.as_ref()) else {
-            skipped += 1;
-            let first_new = (w.start..w.end).find(|&f| !cam_done[f]).unwrap_or(w.end);
-            if first || list.get(wi + 1).is_none_or(|n| n.start > first_new) {
-                return Err(Error::Degenerate(format!(
-                    "frames {}..{}: the window's perspective reconstruction failed or does \
-                     not fit the frames before it, and no later window covers frame {first_new}",
-                    w.start, w.end
-                )));
+            match crate::eval::align_similarity(&est, &glob, false) {
+                Some(a) if a.relative_rms <= 0.1 => Ok((a.scale, a.rotation, a.translation, m)),
+                Some(a) => Err(format!(
+                    "its shared points are {:.1} % of their spread off the placed ones after \
+                     the best similarity (10 % allowed)",
+                    100.0 * a.relative_rms
+                )),
+                None => Err("its shared points are degenerate".into()),
             }
-            continue;
+        });
+        let (sc, a, b, m) = match map {
+            Ok(map) => map,
+            Err(why) => {
+                skipped += 1;
+                let first_new = (w.start..w.end).find(|&f| !cam_done[f]).unwrap_or(w.end);
+                if first || list.get(wi + 1).is_none_or(|n| n.start > first_new) {
+                    return Err(Error::Degenerate(format!(
+                        "frames {}..{}: no perspective window covers frame {first_new} (this \
+                         window: {why})",
+                        w.start, w.end
+                    )));
+                }
+                continue;
+            }
         };
+        let m = &m;
         for f in w.start..w.end {
             if cam_done[f] {
                 continue;
