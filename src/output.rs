@@ -152,11 +152,9 @@ pub fn colmap_model(
         None => {
             let (mut mx, mut my) = (1.0f64, 1.0f64);
             for f in 0..table.n_frames() {
-                for p in 0..table.n_tracks() {
-                    if let Some(q) = table.get(f, p) {
-                        mx = mx.max(q[0] + 1.0);
-                        my = my.max(q[1] + 1.0);
-                    }
+                for e in table.frame_row(f).entries() {
+                    mx = mx.max(e.x + 1.0);
+                    my = my.max(e.y + 1.0);
                 }
             }
             (mx.ceil() as u32, my.ceil() as u32)
