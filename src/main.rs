@@ -12,7 +12,10 @@ use rank3::{CameraModel, Config, Reconstruction};
 #[command(
     name = "rank3",
     version,
-    about = "Structure and motion from 2D point tracks by Tomasi–Kanade factorization"
+    about = "Structure and motion from 2D point tracks by Tomasi–Kanade factorization",
+    after_help = "Exit status: 0 success; 1 an error (bad input, naming its file, line and \
+                  field; an output or recording that could not be written; a solver's setup \
+                  that failed); 2 a usage error (an unknown or missing argument)."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -1020,6 +1023,10 @@ struct TrackOpts {
     /// it leaves the image; its window may cross the border).
     #[arg(long)]
     border_margin: Option<f32>,
+    /// Start new tracks at the whole-pixel corners, without the sub-pixel (Förstner)
+    /// refinement.
+    #[arg(long)]
+    no_subpixel: bool,
 }
 
 impl TrackOpts {
@@ -1036,6 +1043,9 @@ impl TrackOpts {
         c.klt.min_eigenvalue = self.min_eigenvalue;
         c.klt.border_margin = self.border_margin;
         c.redetect_with_points = self.redetect;
+        if self.no_subpixel {
+            c.subpixel = None;
+        }
         c
     }
 }

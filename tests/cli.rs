@@ -188,6 +188,32 @@ fn bad_input_names_file_line_and_field() {
     );
     assert!(err.contains("bad.csv:3: field `x`"), "{err}");
     assert!(err.contains("oops"), "{err}");
+    // The documented exit status: 1 for bad input, 2 for a usage error.
+    let status = |c: &mut std::process::Command| c.output().unwrap().status.code();
+    assert_eq!(
+        status(
+            bin()
+                .arg("reconstruct")
+                .arg(&f)
+                .arg("--out")
+                .arg(d.join("o"))
+        ),
+        Some(1)
+    );
+    assert_eq!(
+        status(bin().arg("reconstruct").arg("--no-such-flag")),
+        Some(2)
+    );
+    assert_eq!(
+        status(
+            bin()
+                .arg("eval")
+                .arg(d.join("missing.json"))
+                .arg("-r")
+                .arg(&f)
+        ),
+        Some(1)
+    );
 
     let f = d.join("bad.txt");
     std::fs::write(&f, "# m\n1 2 3\n4 5\n").unwrap();
