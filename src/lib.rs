@@ -60,3 +60,8 @@ pub use observer::{Both, Event, NoopObserver, Observer};
 pub use reconstruction::{Config, Reconstruction};
 pub use solver::{SolverReport, SolverStatus};
 pub use tracks::{Id, TrackTable};
+
+/// The README's code examples, compiled and run by `cargo test` (doctests).
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;
