@@ -32,6 +32,15 @@ fn table(frames: usize, per_frame: usize, seed: u64) -> (Vec<Observation>, Vec<V
     rank3::synth::perspective_corridor(frames, per_frame, 0.5, seed)
 }
 
+/// `stage seconds / iterations` for each stage, comma-separated.
+fn stage_summary(stages: &[rank3::projective::StageReport]) -> String {
+    stages
+        .iter()
+        .map(|s| format!("{} {:.1} s / {} it", s.stage, s.seconds, s.iterations))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// With `VERBOSE` set, prints every solver iteration to stderr.
 struct Printer;
 
@@ -92,11 +101,7 @@ fn one(frames: usize, per_frame: usize, max_iterations: Option<usize>, affine_wi
     let seconds = t0.elapsed().as_secs_f64();
     match r {
         Ok(fit) => {
-            let stage_s: Vec<String> = fit
-                .stages
-                .iter()
-                .map(|s| format!("{} {:.1} s / {} it", s.stage, s.seconds, s.iterations))
-                .collect();
+            let stage_s = stage_summary(&fit.stages);
             let ba = fit
                 .stages
                 .last()
@@ -108,7 +113,7 @@ fn one(frames: usize, per_frame: usize, max_iterations: Option<usize>, affine_wi
                 fit.rms_px,
                 fit.schur_nnz,
                 fit.report.status,
-                stage_s.join(", ")
+                stage_s
             );
         }
         Err(e) => println!("{frames}\t{n_tracks}\t{}\terror: {e}", obs.len()),
@@ -140,11 +145,7 @@ fn one_perspective(frames: usize, per_frame: usize, focal: Option<f64>) {
     let seconds = t0.elapsed().as_secs_f64();
     match r {
         Ok(fit) => {
-            let stage_s: Vec<String> = fit
-                .stages
-                .iter()
-                .map(|s| format!("{} {:.1} s / {} it", s.stage, s.seconds, s.iterations))
-                .collect();
+            let stage_s = stage_summary(&fit.stages);
             let f = fit.model.focal_px[0];
             let structure = align_similarity(&fit.model.points, &truth, false)
                 .map_or(f64::NAN, |a| 100.0 * a.relative_rms);
@@ -155,7 +156,7 @@ fn one_perspective(frames: usize, per_frame: usize, focal: Option<f64>) {
                 fit.rms_px,
                 100.0 * (f - 500.0).abs() / 500.0,
                 fit.report.status,
-                stage_s.join(", ")
+                stage_s
             );
         }
         Err(e) => println!("{frames}\t{n_tracks}\t{}\terror: {e}", obs.len()),

@@ -586,20 +586,7 @@ impl PerspectiveResult {
         for (k, &p) in out.iter().enumerate() {
             slot[p].1 = k;
         }
-        let outlier_obs: Vec<projective::Observation> = (0..nf)
-            .flat_map(|f| {
-                let slot = &slot;
-                kept.frame_row(f)
-                    .entries()
-                    .iter()
-                    .filter(move |e| slot[e.track as usize].1 != usize::MAX)
-                    .map(move |e| projective::Observation {
-                        frame: f,
-                        track: slot[e.track as usize].1,
-                        xy: [e.x, e.y],
-                    })
-            })
-            .collect();
+        let outlier_obs = observations_of(kept, out);
         let outlier_points: Vec<Vector3<f64>> = ProjectiveModel {
             cameras: (0..nf).map(|f| model.camera_matrix(f)).collect(),
             points: Vec::new(),
@@ -664,6 +651,29 @@ impl PerspectiveResult {
             .collect();
         Self::assemble(pf, cfg, cameras, points, downweighted, outlier_points)
     }
+}
+
+/// The observations of `kept`'s tracks `tracks` as a list for the sparse solvers, track
+/// `tracks[j]` renumbered `j`, frames as in `kept`. `O(observations)`.
+fn observations_of(kept: &TrackTable, tracks: &[usize]) -> Vec<projective::Observation> {
+    let mut slot = vec![usize::MAX; kept.n_tracks()];
+    for (j, &p) in tracks.iter().enumerate() {
+        slot[p] = j;
+    }
+    (0..kept.n_frames())
+        .flat_map(|f| {
+            let slot = &slot;
+            kept.frame_row(f)
+                .entries()
+                .iter()
+                .filter(move |e| slot[e.track as usize] != usize::MAX)
+                .map(move |e| projective::Observation {
+                    frame: f,
+                    track: slot[e.track as usize],
+                    xy: [e.x, e.y],
+                })
+        })
+        .collect()
 }
 
 /// The automatic choice between the scaled orthographic and the perspective camera.
@@ -2410,24 +2420,7 @@ fn sparse_reconstruction(
     let mut model_selection = None;
     let mut perspective = None;
     if config.camera.is_perspective() {
-        let mut slot = vec![usize::MAX; kept.n_tracks()];
-        for (j, &p) in inl.iter().enumerate() {
-            slot[p] = j;
-        }
-        let obs: Vec<projective::Observation> = (0..nf)
-            .flat_map(|f| {
-                let slot = &slot;
-                kept.frame_row(f)
-                    .entries()
-                    .iter()
-                    .filter(move |e| slot[e.track as usize] != usize::MAX)
-                    .map(move |e| projective::Observation {
-                        frame: f,
-                        track: slot[e.track as usize],
-                        xy: [e.x, e.y],
-                    })
-            })
-            .collect();
+        let obs = observations_of(kept, &inl);
         let n_obs = obs.len();
         let per = timer.run("perspective", |o| {
             perspective::fit_observations(

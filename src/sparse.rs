@@ -648,11 +648,7 @@ fn start_windows(
     // The windows' completions and metric upgrades are independent: computed in
     // parallel (memory: every window's dense measurements, O(n_obs · window)), then
     // chained in order.
-    let mut windows = Vec::new();
-    windowed::for_each_window(g, &cfg.window, |start, end, tracks, meas| {
-        windows.push((start, end, tracks.to_vec(), meas.clone()));
-        Ok(())
-    })?;
+    let windows = windowed::collect_windows(g, &cfg.window)?;
     let fitted: Vec<Result<MetricWindow>> = windows
         .par_iter()
         .map(|(start, end, tracks, meas)| {

@@ -22,13 +22,13 @@ use crate::projective::windowed::{self, WindowConfig};
 use crate::projective::{self, AffineStart, Normalization, Observation, ProjectiveConfig};
 use crate::{Measurements, NoopObserver, Observer};
 
-/// One window's metric fit (normalised units of the sequence's graph).
+/// One window of frames ([`windowed::collect_windows`]) and its metric fit (normalised
+/// units of the sequence's graph), or why it has none.
 struct Window {
     start: usize,
     end: usize,
     tracks: Vec<usize>,
     meas: Measurements,
-    /// The window's metric model, or why it has none.
     fit: std::result::Result<PerspectiveModel, String>,
 }
 
@@ -88,17 +88,16 @@ pub fn fit_observations(
     projective::check_graph(&g)?;
     let t0 = std::time::Instant::now();
     observer.on_event(&crate::Event::StageStarted { stage: "windows" });
-    let mut list = Vec::new();
-    windowed::for_each_window(&g, windows, |start, end, tracks, meas| {
-        list.push(Window {
+    let mut list: Vec<Window> = windowed::collect_windows(&g, windows)?
+        .into_iter()
+        .map(|(start, end, tracks, meas)| Window {
             start,
             end,
-            tracks: tracks.to_vec(),
-            meas: meas.clone(),
+            tracks,
+            meas,
             fit: Err("not fitted".into()),
-        });
-        Ok(())
-    })?;
+        })
+        .collect();
     // Window settings in the graph's normalised units: principal point 0, scale 1.
     let window_cfg = |focal: Option<f64>| PerspectiveConfig {
         intrinsics: Intrinsics {
@@ -261,7 +260,7 @@ fn chain(list: &[Window], nf: usize, np: usize, cfg: &WindowConfig) -> Result<Ch
     for (wi, w) in list.iter().enumerate() {
         let seen = windowed::seen_in_window(&w.meas, w.tracks.len());
         // X_glob = sc · A x + b.
-        let map = w.fit.clone().and_then(|m| {
+        let map = w.fit.as_ref().map_err(String::clone).and_then(|m| {
             if first {
                 return Ok((1.0, Matrix3::identity(), Vector3::zeros(), m));
             }
@@ -299,7 +298,6 @@ fn chain(list: &[Window], nf: usize, np: usize, cfg: &WindowConfig) -> Result<Ch
                 continue;
             }
         };
-        let m = &m;
         for f in w.start..w.end {
             if cam_done[f] {
                 continue;

@@ -461,10 +461,12 @@ pub fn fit(
         distortion: false,
         ..cfg.clone()
     };
+    // One graph for every start and the final adjustment (the same assumed frame).
+    let g = normalised_graph(meas, &assumed);
     let mut best: Option<(usize, f64, PerspectiveModel)> = None;
     for (i, (report, start)) in starts.iter_mut().enumerate() {
-        let screened = adjust_from(
-            meas,
+        let screened = adjust_graph(
+            &g,
             start.clone(),
             &screen_cfg,
             &assumed,
@@ -488,7 +490,7 @@ pub fn fit(
     };
     starts[chosen].0.chosen = true;
     let estimate_pp = cfg.estimates_principal_point(&assumed);
-    let mut out = adjust_from(meas, start, cfg, &assumed, estimate_pp, run, observer)?;
+    let mut out = adjust_graph(&g, start, cfg, &assumed, estimate_pp, run, observer)?;
     out.selfcal = selfcal_report;
     out.starts = starts.into_iter().map(|(r, _)| r).collect();
     Ok(out)
@@ -619,8 +621,8 @@ pub fn adjust(
     let mut assumed = assumed_frame(meas, &cfg.intrinsics);
     assumed.principal_point = start.principal_point;
     let estimate_pp = cfg.estimates_principal_point(&assumed);
-    adjust_from(
-        meas,
+    adjust_graph(
+        &normalised_graph(meas, &assumed),
         start.clone(),
         cfg,
         &assumed,
@@ -630,30 +632,21 @@ pub fn adjust(
     )
 }
 
-/// The adjustment stages, in normalised units `ŵ = (w − c)/s` (`c` the assumed principal
-/// point, `s` the assumed scale); a second stage frees the principal point when
-/// `estimate_pp`, and `k₁` when `cfg.distortion`.
-#[allow(clippy::too_many_arguments)]
-fn adjust_from(
-    meas: &Measurements,
-    start: PerspectiveModel,
-    cfg: &PerspectiveConfig,
-    assumed: &Assumed,
-    estimate_pp: bool,
-    run: usize,
-    observer: &mut dyn Observer,
-) -> Result<PerspectiveFit> {
+/// The camera–point graph of `meas`, its positions normalised by `assumed`
+/// (`ŵ = (w − c)/s`, `c` the assumed principal point, `s` the assumed scale): the units
+/// of [`adjust_graph`]. `O(F·N)` for dense measurements; built once per fit.
+fn normalised_graph(meas: &Measurements, assumed: &Assumed) -> projective::bundle::Graph {
     let norm = Normalization {
         centre: assumed.principal_point,
         scale: 1.0 / assumed.scale,
     };
-    let g = projective::graph(meas, &norm);
-    adjust_graph(&g, start, cfg, assumed, estimate_pp, run, observer)
+    projective::graph(meas, &norm)
 }
 
-/// [`adjust_from`] on the camera–point graph `g`, its positions normalised by `assumed`
-/// (`ŵ = (w − c)/s`). Cost per iteration and memory linear in the observations for a
-/// banded camera graph (a video's).
+/// The adjustment stages on the camera–point graph `g`, its positions normalised by
+/// `assumed` ([`normalised_graph`]); a second stage frees the principal point when
+/// `estimate_pp`, and `k₁` when `cfg.distortion`. Cost per iteration and memory linear in
+/// the observations for a banded camera graph (a video's).
 fn adjust_graph(
     g: &projective::bundle::Graph,
     start: PerspectiveModel,

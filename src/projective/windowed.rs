@@ -436,6 +436,21 @@ pub(crate) fn complete_window(
     })
 }
 
+/// Every window of [`for_each_window`], collected — `(start, end, tracks, measurements)` —
+/// for chains that fit the windows in parallel before chaining them in order. Memory:
+/// every window's dense measurements, `O(n_obs · window)` in total.
+pub(crate) type Window = (usize, usize, Vec<usize>, Measurements);
+
+/// See [`Window`].
+pub(crate) fn collect_windows(g: &Graph, cfg: &WindowConfig) -> Result<Vec<Window>> {
+    let mut windows = Vec::new();
+    for_each_window(g, cfg, |start, end, tracks, meas| {
+        windows.push((start, end, tracks.to_vec(), meas.clone()));
+        Ok(())
+    })?;
+    Ok(windows)
+}
+
 /// Calls `each(start, end, tracks, meas)` for every window in order: frames
 /// `start..end`, the tracks seen in ≥ 2 of them (indices into `g`) and their dense
 /// measurements (window frames × those tracks).
