@@ -30,7 +30,7 @@ fn main() {
         );
         return;
     }
-    let table = match rank3::tracks::dense::read_xy(&xs, &ys) {
+    let table = match rank3::table::dense::read_xy(&xs, &ys) {
         Ok(t) => t,
         Err(e) => {
             println!("cannot read the hotel tracks: {e}");

@@ -6,7 +6,7 @@
 //! `cargo run --release --example hotel` (data set directory from `RANK3_DATASETS`, default
 //! `../shared/datasets`).
 
-use rank3::tracks::dense::read_xy;
+use rank3::table::dense::read_xy;
 use rank3::{CameraModel, Config, Reconstruction};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

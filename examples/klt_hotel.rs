@@ -7,11 +7,11 @@
 //! `cargo run --release --example klt_hotel` (data set directory from `RANK3_DATASETS`,
 //! default `../shared/datasets`; prints nothing when the data set is absent).
 
-use rank3::track::{
+use rank3::table::dense::read_xy;
+use rank3::tracking::{
     DetectConfig, FrameSource, GrayImage, Pyramid, SubpixelConfig, SubpixelMethod, Tracker,
     TrackerConfig, detect_corners, refine_corners,
 };
-use rank3::tracks::dense::read_xy;
 use rank3::{CameraModel, Config, Id, Reconstruction, TrackTable};
 
 fn quantile(v: &mut [f64], q: f64) -> f64 {

@@ -8,8 +8,8 @@
 //! `DUMP_DIR/<motion>/` for `examples/klt_vs_opencv.py --synthetic DUMP_DIR`.
 
 use rank3::Id;
-use rank3::track::synthetic::{Motion, Sequence, SequenceConfig};
-use rank3::track::{Tracker, TrackerConfig};
+use rank3::tracking::synthetic::{Motion, Sequence, SequenceConfig};
+use rank3::tracking::{Tracker, TrackerConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let raw: Vec<String> = std::env::args().skip(1).collect();
@@ -77,9 +77,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             for (f, img) in images.iter().enumerate() {
                 img.save_png(&d.join("frames").join(format!("{f:03}.png")))?;
             }
-            let pyr = rank3::track::Pyramid::new(&images[0], 0, 8);
-            let dcfg = rank3::track::DetectConfig::default();
-            let corners = rank3::track::detect_corners(&pyr.levels[0], &dcfg, 11, None);
+            let pyr = rank3::tracking::Pyramid::new(&images[0], 0, 8);
+            let dcfg = rank3::tracking::DetectConfig::default();
+            let corners = rank3::tracking::detect_corners(&pyr.levels[0], &dcfg, 11, None);
             let mut init = String::new();
             let mut truth = String::from("frame,track,x,y\n");
             for (p, c) in corners.iter().enumerate() {

@@ -1,5 +1,5 @@
 //! The textured mesh measured: on synthetic textured scenes with a known surface (rendered by
-//! `rank3::track::scene3d`, tracked, reconstructed and meshed as `rank3 run` does), the mean
+//! `rank3::tracking::scene3d`, tracked, reconstructed and meshed as `rank3 run` does), the mean
 //! distance of the mesh to the true surface after a similarity alignment, the share of
 //! triangles that bridge two surfaces, and the time of each stage; on the hotel sequence
 //! (when the data set is present), the mesh and texture figures and the stages' times.
@@ -11,8 +11,8 @@ use std::time::Instant;
 
 use nalgebra::Vector3;
 use rank3::mesh::{MeshConfig, Scene};
-use rank3::track::scene3d::{Scene3d, arc_cameras, write_frames};
-use rank3::track::{FrameSource, TrackerConfig, track_source};
+use rank3::tracking::scene3d::{Scene3d, arc_cameras, write_frames};
+use rank3::tracking::{FrameSource, TrackerConfig, track_source};
 use rank3::{Config, Reconstruction};
 
 struct Run {

@@ -1041,7 +1041,7 @@ pub fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
 /// field for a malformed line, a coordinate that is not finite, or two images with the same
 /// name; [`Error::EmptyTable`] when no keypoint names a 3D point.
 pub fn read_tracks(dir: &Path) -> Result<(crate::TrackTable, Vec<String>)> {
-    use crate::tracks::Id;
+    use crate::table::Id;
     let path = dir.join(IMAGES_TXT);
     if !path.is_file() {
         let hint = if dir.join("images.bin").is_file() {

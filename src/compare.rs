@@ -35,7 +35,7 @@ use serde::{Deserialize, Serialize};
 use crate::CameraModel;
 use crate::eval::{align_similarity, median, rotation_errors_deg_with};
 use crate::reconstruction_file::{self, ReadError, ReconstructionFile};
-use crate::tracks::Id;
+use crate::table::Id;
 
 /// Fewest common (usable) points a comparison needs: a similarity has 7 degrees of
 /// freedom, and 3 points are nearly always fitted exactly.

@@ -37,9 +37,9 @@ pub enum Error {
     UnknownFormat { path: PathBuf },
     /// A NumPy `.npy` / `.npz` input is malformed or is not a track layout rank3 reads
     /// (docs/formats.md): the file, the `.npz` member, the field at fault and the kind of
-    /// fault ([`crate::tracks::npy::ArrayError`], boxed to keep `Error` small).
+    /// fault ([`crate::table::npy::ArrayError`], boxed to keep `Error` small).
     #[error(transparent)]
-    Array(Box<crate::tracks::npy::ArrayError>),
+    Array(Box<crate::table::npy::ArrayError>),
     /// The table has no usable observations.
     #[error("empty track table{}: {reason}", source_suffix(.path))]
     EmptyTable {

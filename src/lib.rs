@@ -3,7 +3,7 @@
 //! Structure and motion from 2D point tracks by Tomasi–Kanade factorization,
 //! made to work on real, partial, messy track tables.
 //!
-//! Pipeline: [`tracks::TrackTable`] → set-aside of under-observed tracks and frames →
+//! Pipeline: [`table::TrackTable`] → set-aside of under-observed tracks and frames →
 //! observation matrix `W` (2F×N) → rank-3 factorization (centering + truncated SVD for
 //! complete data, low-rank completion for missing data) → metric upgrade
 //! ([`metric`]) → Levenberg–Marquardt refinement ([`refine`]) → [`reconstruction::Reconstruction`].
@@ -50,8 +50,8 @@ pub mod solver;
 pub mod sparse;
 pub mod svd;
 pub mod synth;
-pub mod track;
-pub mod tracks;
+pub mod table;
+pub mod tracking;
 
 pub use camera::{CameraModel, MetricModel};
 pub use error::{Error, Result};
@@ -59,7 +59,7 @@ pub use measurements::Measurements;
 pub use observer::{Both, Event, NoopObserver, Observer};
 pub use reconstruction::{Config, Reconstruction};
 pub use solver::{SolverReport, SolverStatus};
-pub use tracks::{Id, TrackTable};
+pub use table::{Id, TrackTable};
 
 /// The README's code examples, compiled and run by `cargo test` (doctests).
 #[doc = include_str!("../README.md")]

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use rank3::synth::{Motion, OutlierKind, Shape, SynthConfig};
-use rank3::tracks::read_tracks;
+use rank3::table::read_tracks;
 use rank3::{CameraModel, Config, Reconstruction};
 
 #[derive(Parser)]
@@ -498,7 +498,7 @@ fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     // which bad input must not destroy).
     let loaded = match (&a.tracks, &a.x, &a.y) {
         (Some(t), _, _) => read_tracks(t)?,
-        (None, Some(x), Some(y)) => rank3::tracks::read_xy(x, y)?,
+        (None, Some(x), Some(y)) => rank3::table::read_xy(x, y)?,
         _ => {
             return Err(rank3::Error::InvalidConfig {
                 field: "TRACKS",
@@ -1030,8 +1030,8 @@ struct TrackOpts {
 }
 
 impl TrackOpts {
-    fn config(&self) -> rank3::track::TrackerConfig {
-        let mut c = rank3::track::TrackerConfig::default();
+    fn config(&self) -> rank3::tracking::TrackerConfig {
+        let mut c = rank3::tracking::TrackerConfig::default();
         c.detect.max_features = self.max_features;
         c.detect.quality_level = self.quality;
         c.detect.min_distance = self.min_distance;
@@ -1099,7 +1099,7 @@ struct Tracked {
     image_size: Option<[u32; 2]>,
     /// Per-frame counts (recorded with `--rrd`).
     #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
-    stats: Vec<rank3::track::FrameStats>,
+    stats: Vec<rank3::tracking::FrameStats>,
 }
 
 /// Tracks `input` with a progress bar; prints a summary to stderr. `on_frame` sees every
@@ -1107,15 +1107,15 @@ struct Tracked {
 fn track_input(
     input: &Path,
     opts: &TrackOpts,
-    on_frame: &mut dyn FnMut(usize, &rank3::track::GrayImage),
+    on_frame: &mut dyn FnMut(usize, &rank3::tracking::GrayImage),
 ) -> Result<Tracked, rank3::Error> {
     let cfg = opts.config();
     let init = opts
         .init_points
         .as_deref()
-        .map(rank3::track::read_init_points)
+        .map(rank3::tracking::read_init_points)
         .transpose()?;
-    let mut src = rank3::track::FrameSource::open(input)?;
+    let mut src = rank3::tracking::FrameSource::open(input)?;
     let bar = match src.len_hint() {
         Some(n) => indicatif::ProgressBar::new(n as u64).with_style(bar_style(
             "tracking {bar:30} {pos}/{len} frames ({per_sec}, eta {eta}) {msg}",
@@ -1128,7 +1128,7 @@ fn track_input(
     let cpu0 = process_cpu_seconds();
     let mut stats = Vec::new();
     let mut image_size = None;
-    let result = rank3::track::track_source(&mut src, &cfg, init, &mut |s, image| {
+    let result = rank3::tracking::track_source(&mut src, &cfg, init, &mut |s, image| {
         image_size.get_or_insert([image.width as u32, image.height as u32]);
         bar.inc(1);
         bar.set_message(format!("{} alive", s.alive));
@@ -1214,9 +1214,9 @@ fn track_recorded(
     // The input must open (folder with images, decodable video) before the recording is
     // opened: opening it replaces an existing .rrd, which a run that fails at once on bad
     // input must not destroy.
-    drop(rank3::track::FrameSource::open(input)?);
+    drop(rank3::tracking::FrameSource::open(input)?);
     if let Some(p) = &opts.init_points {
-        rank3::track::read_init_points(p)?;
+        rank3::tracking::read_init_points(p)?;
     }
     // `rank3 track` logs the table itself; `rank3 run` reconstructs from it.
     #[cfg(feature = "rerun")]
@@ -1280,7 +1280,7 @@ fn track_cmd(a: &TrackArgs) -> Result<(), rank3::Error> {
         &a.record,
     )?;
     // Fail on a bad output extension before the (long) tracking.
-    rank3::tracks::Format::from_path(&a.out)?;
+    rank3::table::Format::from_path(&a.out)?;
     let (tracked, _recording) = track_recorded(
         &a.input,
         &a.opts,

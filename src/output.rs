@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::reconstruction::Reconstruction;
-use crate::tracks::dense::write_matrix;
+use crate::table::dense::write_matrix;
 use crate::{Error, Id, Result};
 
 /// Paths of the files [`write_all`] wrote.

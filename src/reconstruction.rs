@@ -33,7 +33,7 @@ use crate::projective::{self, ProjectiveConfig, ProjectiveModel};
 use crate::refine::{self, RefineConfig, RefineResult};
 use crate::robust::{self, RobustConfig};
 use crate::svd::{self, SvdMethod, TruncatedSvdConfig};
-use crate::tracks::{Id, SetAside};
+use crate::table::{Id, SetAside};
 use crate::{
     CameraModel, Error, Event, Measurements, MetricModel, NoopObserver, Observer, Result,
     SolverStatus, TrackTable,
@@ -1976,8 +1976,8 @@ fn set_aside_warning(set_aside: &[SetAside]) -> Option<String> {
     (!set_aside.is_empty()).then(|| {
         format!(
             "{} track(s) and {} frame(s) set aside (see `set_aside`)",
-            count(crate::tracks::SetAsideKind::Track),
-            count(crate::tracks::SetAsideKind::Frame)
+            count(crate::table::SetAsideKind::Track),
+            count(crate::table::SetAsideKind::Frame)
         )
     })
 }

@@ -31,7 +31,7 @@ use crate::SolverStatus;
 use crate::completion::{CompletionModel, CompletionSolverKind};
 use crate::metric::UpgradeMethod;
 use crate::projective::Start;
-use crate::tracks::{Id, SetAside};
+use crate::table::{Id, SetAside};
 
 /// The schema this rank3 writes and reads: `"rank3.reconstruction/1"`.
 pub const SCHEMA: &str = "rank3.reconstruction/1";

@@ -104,7 +104,7 @@ use rerun::{
 
 use crate::metric::UpgradeMethod;
 use crate::synth::SynthScene;
-use crate::tracks::SetAsideKind;
+use crate::table::SetAsideKind;
 use crate::{Config, Error, Event, MetricModel, Observer, Reconstruction, TrackTable};
 
 /// Stage names in `stage`-timeline order (their index is the timeline value).
@@ -2031,7 +2031,7 @@ pub fn log_robust(
 pub fn log_frame(
     rec: &RecordingStream,
     index: usize,
-    image: &crate::track::GrayImage,
+    image: &crate::tracking::GrayImage,
     quality: u8,
 ) -> RecordingResult {
     let (w, h) = (image.width, image.height);
@@ -2062,9 +2062,12 @@ pub fn log_frame(
 /// the reasons out_of_image, low_texture, residual and forward_backward.
 ///
 /// Cost: O(F).
-pub fn log_tracking(rec: &RecordingStream, stats: &[crate::track::FrameStats]) -> RecordingResult {
+pub fn log_tracking(
+    rec: &RecordingStream,
+    stats: &[crate::tracking::FrameStats],
+) -> RecordingResult {
     let frames: Vec<usize> = stats.iter().map(|s| s.frame).collect();
-    type Count = fn(&crate::track::FrameStats) -> usize;
+    type Count = fn(&crate::tracking::FrameStats) -> usize;
     let series: [(&str, Count); 7] = [
         ("tracked", |s| s.tracked),
         ("new", |s| s.new),
@@ -2363,8 +2366,8 @@ mod tests {
     #[test]
     fn trajectories_match_a_walk_along_each_track() {
         let mut t = TrackTable::new(
-            (0..4).map(crate::tracks::Id::Int).collect(),
-            (0..3).map(crate::tracks::Id::Int).collect(),
+            (0..4).map(crate::table::Id::Int).collect(),
+            (0..3).map(crate::table::Id::Int).collect(),
         );
         for (f, p, x, y) in [
             (0, 0, 1.0, 2.0),

@@ -92,8 +92,8 @@ mod tests {
         assert!(c2.refine.is_none());
         assert_eq!(c2.perspective.intrinsics.focal_px, Some(800.0));
         assert_eq!(c2.completion.max_iterations, c.completion.max_iterations);
-        let t = crate::track::TrackerConfig::default();
-        let t2: crate::track::TrackerConfig =
+        let t = crate::tracking::TrackerConfig::default();
+        let t2: crate::tracking::TrackerConfig =
             apply(&t, &serde_json::json!({"klt": {"window": 15}})).unwrap();
         assert_eq!(t2.klt.window, 15);
     }

@@ -65,7 +65,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::projective::bundle::{self, BundleModel, Graph, Jacobians, LmConfig, Progress};
 use crate::projective::windowed::{self, WindowConfig};
-use crate::tracks::TrackTable;
+use crate::table::TrackTable;
 use crate::{CameraModel, Error, MetricModel, Observer, Result, SolverReport};
 
 /// Which pipeline runs: the dense one (every stage, `O(F·N)` memory) or the sparse one.

@@ -24,7 +24,7 @@ use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
 use crate::projective::Observation;
-use crate::tracks::{Id, TrackTable};
+use crate::table::{Id, TrackTable};
 use crate::{CameraModel, Error, MetricModel, Result};
 
 /// Scene shape.

@@ -255,7 +255,7 @@ fn bad_input_names_file_line_and_field() {
 /// textured with the synthetic module's procedural texture and seen by an orthographic
 /// camera whose rotation `Rx(α_k) Ry(φ_k)` changes every frame.
 struct Corner {
-    tex: rank3::track::synthetic::Sequence,
+    tex: rank3::tracking::synthetic::Sequence,
     rotations: Vec<nalgebra::Matrix3<f64>>,
     w: usize,
     h: usize,
@@ -268,7 +268,7 @@ const CORNER_H: f64 = 0.75;
 
 impl Corner {
     fn new(frames: usize) -> Corner {
-        use rank3::track::synthetic::{Sequence, SequenceConfig};
+        use rank3::tracking::synthetic::{Sequence, SequenceConfig};
         let tex = Sequence::new(SequenceConfig {
             width: 256,
             height: 160,
@@ -322,7 +322,7 @@ impl Corner {
         best.map(|(_, x, f)| (x, f))
     }
 
-    fn render(&self, k: usize) -> rank3::track::GrayImage {
+    fn render(&self, k: usize) -> rank3::tracking::GrayImage {
         let mut data = vec![0.5f32; self.w * self.h];
         for v in 0..self.h {
             for u in 0..self.w {
@@ -337,7 +337,7 @@ impl Corner {
                 }
             }
         }
-        rank3::track::GrayImage::new(self.w, self.h, data).unwrap()
+        rank3::tracking::GrayImage::new(self.w, self.h, data).unwrap()
     }
 }
 

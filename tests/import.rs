@@ -9,8 +9,8 @@ use rank3::Error;
 use rank3::colmap::{
     ColmapCamera, ColmapCameraModel, ColmapImage, ColmapModel, ColmapPoint, PIXEL_CENTRE_OFFSET,
 };
-use rank3::tracks::npy::ArrayFault;
-use rank3::tracks::{Id, TrackTable, read_tracks, read_xy};
+use rank3::table::npy::ArrayFault;
+use rank3::table::{Id, TrackTable, read_tracks, read_xy};
 
 mod common;
 use common::{bin, run_err, run_ok};

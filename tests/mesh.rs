@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use nalgebra::Vector3;
-use rank3::track::scene3d::{Scene3d, arc_cameras, write_frames};
+use rank3::tracking::scene3d::{Scene3d, arc_cameras, write_frames};
 
 mod common;
 use common::{bin, run_ok};

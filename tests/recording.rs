@@ -12,7 +12,7 @@ use std::path::Path;
 
 use rank3::recording::{self, RecordingObserver, paths};
 use rank3::synth::{Shape, SynthConfig, generate};
-use rank3::tracks::Id;
+use rank3::table::Id;
 use rank3::{Config, Event, Observer, Reconstruction, TrackTable};
 use re_log_encoding::DecoderApp;
 use rerun::components::Position3D;
@@ -1134,7 +1134,7 @@ exec "$RANK3_TEST_RERUN" "$@" --screenshot-to "$RANK3_TEST_SHOT" --window-size 1
 /// counts and the resulting tracks.
 #[test]
 fn cli_track_records_frames_counts_and_tracks() {
-    use rank3::track::synthetic::{Motion, Sequence, SequenceConfig};
+    use rank3::tracking::synthetic::{Motion, Sequence, SequenceConfig};
     let dir = std::env::temp_dir().join(format!("rank3-recording-track-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let frames_dir = dir.join("frames");

@@ -95,10 +95,8 @@ fn long_perspective_video_runs_the_sparse_perspective_path() {
         .map(|o| (o.frame as u32, o.track as u32, o.xy[0], o.xy[1]))
         .collect();
     let table = rank3::TrackTable::from_observations(
-        (0..130).map(rank3::tracks::Id::Int).collect(),
-        (0..truth.len() as i64)
-            .map(rank3::tracks::Id::Int)
-            .collect(),
+        (0..130).map(rank3::table::Id::Int).collect(),
+        (0..truth.len() as i64).map(rank3::table::Id::Int).collect(),
         &rows,
     )
     .unwrap();
@@ -131,7 +129,7 @@ fn long_perspective_video_runs_the_sparse_perspective_path() {
         .iter()
         .filter(|q| q.inlier)
         .map(|q| match q.track {
-            rank3::tracks::Id::Int(t) => truth[t as usize],
+            rank3::table::Id::Int(t) => truth[t as usize],
             _ => unreachable!(),
         })
         .collect();

@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 
 use rank3::Error;
-use rank3::track::synthetic::{Motion, Sequence, SequenceConfig};
-use rank3::track::{
+use rank3::tracking::synthetic::{Motion, Sequence, SequenceConfig};
+use rank3::tracking::{
     DetectConfig, FrameSource, GrayImage, Pyramid, Tracker, TrackerConfig, detect_corners,
     read_init_points, track_path,
 };

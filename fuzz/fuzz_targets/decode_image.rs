@@ -4,7 +4,7 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    if let Ok(img) = rank3::track::GrayImage::decode(data, std::path::Path::new("fuzz.png")) {
+    if let Ok(img) = rank3::tracking::GrayImage::decode(data, std::path::Path::new("fuzz.png")) {
         assert_eq!(img.data.len(), img.width * img.height);
         assert!((img.width * img.height) as u64 <= rank3::budget::FRAME_PIXELS);
     }

@@ -6,7 +6,7 @@ fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    if let Ok(pts) = rank3::track::parse_init_points(text, std::path::Path::new("fuzz.txt")) {
+    if let Ok(pts) = rank3::tracking::parse_init_points(text, std::path::Path::new("fuzz.txt")) {
         assert!(pts.iter().all(|p| p[0].is_finite() && p[1].is_finite()));
     }
 });

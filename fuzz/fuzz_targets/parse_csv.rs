@@ -7,7 +7,7 @@ fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    if let Ok(t) = rank3::tracks::csv::parse(text, std::path::Path::new("fuzz.csv")) {
+    if let Ok(t) = rank3::table::csv::parse(text, std::path::Path::new("fuzz.csv")) {
         let (t, _warnings) = t;
         for f in 0..t.n_frames() {
             for p in 0..t.n_tracks() {

@@ -7,7 +7,7 @@ fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    if let Ok(t) = rank3::tracks::dense::parse(text, std::path::Path::new("fuzz.txt")) {
+    if let Ok(t) = rank3::table::dense::parse(text, std::path::Path::new("fuzz.txt")) {
         for f in 0..t.n_frames() {
             for p in 0..t.n_tracks() {
                 if let Some([x, y]) = t.get(f, p) {

@@ -48,7 +48,7 @@ def default_settings(kind: str = "reconstruct") -> dict:
     """The library's default settings, as nested dicts: ``"reconstruct"`` (every field of
     ``rank3::Config``: the sections ``svd``, ``metric``, ``robust``, ``completion``,
     ``refine``, ``projective``, ``perspective``, ``sparse`` and the top-level values) or ``"track"``
-    (``rank3::track::TrackerConfig``: ``detect``, ``klt`` and the re-detection values).
+    (``rank3::tracking::TrackerConfig``: ``detect``, ``klt`` and the re-detection values).
     Any of them can be overridden by keyword argument (see :func:`reconstruct`)."""
     return json.loads(_rank3.default_settings(kind))
 

@@ -358,7 +358,7 @@ fn table_from_py(
 fn default_settings(kind: &str) -> PyResult<String> {
     let v = match kind {
         "reconstruct" => rank3::settings::to_value(&Config::default()),
-        "track" => rank3::settings::to_value(&rank3::track::TrackerConfig::default()),
+        "track" => rank3::settings::to_value(&rank3::tracking::TrackerConfig::default()),
         _ => return Err(ConfigError::new_err(format!("no settings named {kind:?}"))),
     }
     .map_err(to_py)?;
@@ -385,7 +385,10 @@ fn write_tracks(
 }
 
 /// The progress event of one tracked frame.
-fn frame_event<'py>(py: Python<'py>, s: &rank3::track::FrameStats) -> PyResult<Bound<'py, PyDict>> {
+fn frame_event<'py>(
+    py: Python<'py>,
+    s: &rank3::tracking::FrameStats,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("kind", "frame")?;
     d.set_item("frame", s.frame)?;
@@ -403,11 +406,11 @@ fn track_path<'py>(
     settings: &str,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
-    let cfg = apply_settings(&rank3::track::TrackerConfig::default(), settings)?;
+    let cfg = apply_settings(&rank3::tracking::TrackerConfig::default(), settings)?;
     let mut obs = PyObserver::new(progress);
     let (t, _) = run_detached(py, || {
-        let mut src = rank3::track::FrameSource::open(&path)?;
-        rank3::track::track_source(&mut src, &cfg, None, &mut |s, _| {
+        let mut src = rank3::tracking::FrameSource::open(&path)?;
+        rank3::tracking::track_source(&mut src, &cfg, None, &mut |s, _| {
             obs.poll(true, |py| frame_event(py, s))
         })
     })?;
@@ -423,8 +426,8 @@ fn track_frames<'py>(
     settings: &str,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
-    let cfg = apply_settings(&rank3::track::TrackerConfig::default(), settings)?;
-    let mut tracker = rank3::track::Tracker::new(cfg).map_err(to_py)?;
+    let cfg = apply_settings(&rank3::tracking::TrackerConfig::default(), settings)?;
+    let mut tracker = rank3::tracking::Tracker::new(cfg).map_err(to_py)?;
     let np = py.import("numpy")?;
     for (k, frame) in frames.try_iter()?.enumerate() {
         let frame = frame?;
@@ -460,7 +463,7 @@ fn track_frames<'py>(
             .into_iter()
             .map(|v| v * scale)
             .collect();
-        let img = rank3::track::GrayImage::new(shape[1], shape[0], data).map_err(to_py)?;
+        let img = rank3::tracking::GrayImage::new(shape[1], shape[0], data).map_err(to_py)?;
         py.check_signals()?;
         let stats = py
             .detach(|| tracker.push(Id::from(k), &img))

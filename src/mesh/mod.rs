@@ -34,7 +34,7 @@ use surface::Observed;
 pub use surface::{SurfaceReport, Triangle};
 pub use texture::TextureReport;
 
-use crate::tracks::Id;
+use crate::table::Id;
 use crate::{Error, Result};
 
 /// Settings of the mesh and texture stages; the defaults are the documented values.
@@ -306,7 +306,7 @@ pub fn from_frames(
     cfg: &MeshConfig,
 ) -> Result<Mesh> {
     let scene = Scene::from_reconstruction(rec, table, image_size)?;
-    let mut source = crate::track::FrameSource::open_color(frames)?;
+    let mut source = crate::tracking::FrameSource::open_color(frames)?;
     let mut feed = || source.next_color_frame();
     build(&scene, cfg, Some(&mut feed))
 }

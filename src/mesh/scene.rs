@@ -15,7 +15,7 @@ use std::collections::HashMap;
 use nalgebra::{Matrix3, Matrix3x4, Vector3, Vector4};
 
 use crate::reconstruction::Reconstruction;
-use crate::tracks::Id;
+use crate::table::Id;
 use crate::{Error, Result, TrackTable};
 
 /// One frame's camera.

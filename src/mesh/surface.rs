@@ -39,7 +39,7 @@ use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 
 use super::MeshConfig;
 use super::scene::Scene;
-use crate::tracks::Id;
+use crate::table::Id;
 
 /// One kept triangle: input track indices, counter-clockwise in its reference view's image
 /// (x right, y down: the signed area `(b−a)×(c−a)` is positive).

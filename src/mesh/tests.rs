@@ -8,7 +8,7 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 
 use super::*;
-use crate::track::scene3d::{Patch, Pinhole, Scene3d};
+use crate::tracking::scene3d::{Patch, Pinhole, Scene3d};
 
 const SIZE: [u32; 2] = [320, 240];
 

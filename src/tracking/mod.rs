@@ -46,7 +46,7 @@ pub use klt::{Failure, KltConfig, track_points};
 pub use pyramid::Pyramid;
 pub use subpixel::{SubpixelConfig, SubpixelMethod, refine_corners};
 
-use crate::tracks::{Id, TrackTable};
+use crate::table::{Id, TrackTable};
 use crate::{Error, Result};
 
 /// Tracker settings; every field has a documented default.

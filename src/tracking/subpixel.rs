@@ -273,9 +273,9 @@ fn response_fit(resp: &[f32], w: usize, h: usize, p0: [f32; 2]) -> Option<[f32; 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::track::detect::{DetectConfig, detect_corners};
-    use crate::track::frames::GrayImage;
-    use crate::track::pyramid::Pyramid;
+    use crate::tracking::detect::{DetectConfig, detect_corners};
+    use crate::tracking::frames::GrayImage;
+    use crate::tracking::pyramid::Pyramid;
 
     /// Standard normal CDF through erf (Abramowitz & Stegun 7.1.26, |error| < 1.5e-7).
     fn phi(t: f64) -> f64 {

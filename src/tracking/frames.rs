@@ -21,7 +21,7 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdout, Command, Stdio};
 
-use crate::tracks::Id;
+use crate::table::Id;
 use crate::{Error, Result};
 
 /// A grayscale image, row-major, intensities in `[0, 1]`.

@@ -244,8 +244,8 @@ pub fn detect_corners_filtered(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::track::frames::GrayImage;
-    use crate::track::pyramid::Pyramid;
+    use crate::tracking::frames::GrayImage;
+    use crate::tracking::pyramid::Pyramid;
 
     /// A bright square on a dark background: exactly its four corners, strongest first,
     /// within a pixel of the true corners; the cap and the spacing are honoured.

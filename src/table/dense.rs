@@ -301,7 +301,7 @@ mod tests {
     }
 
     fn err(txt: &str) -> (usize, String, String) {
-        crate::tracks::parse_error_parts(parse(txt, p()).unwrap_err())
+        crate::table::parse_error_parts(parse(txt, p()).unwrap_err())
     }
 
     #[test]
