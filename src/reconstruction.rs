@@ -995,212 +995,42 @@ impl Reconstruction {
             timings: Vec::new(),
         };
         let mut warnings = Vec::new();
-        // An affine camera (2×4) needs 4 points per frame when it is estimated jointly with
-        // the translation (missing data); centering needs only 3.
+
+        // 1. Set-aside: tracks seen in too few frames, frames with too few tracks. An affine
+        //    camera (2×4) needs 4 points per frame when it is estimated jointly with the
+        //    translation (missing data); centering needs only 3.
         let min_points = min_points_per_frame(config, table.is_complete());
-        let (kept, mut set_aside, kept_frames, kept_tracks) = timer.run("set-aside", |_| {
+        let (kept_table, set_aside, frames, tracks) = timer.run("set-aside", |_| {
             table.set_aside(config.min_frames_per_track, min_points)
         });
-        check_size(&kept)?;
-        if let Some(reason) = sparse_reason(&kept, config)? {
-            return sparse_reconstruction(
-                table,
-                Kept {
-                    table: &kept,
-                    frames: kept_frames,
-                    tracks: kept_tracks,
-                    set_aside,
-                },
+        check_size(&kept_table)?;
+        let kept = Kept {
+            table: &kept_table,
+            frames,
+            tracks,
+            set_aside,
+        };
+        // Long or sparse tables take the sparse pipeline.
+        if let Some(reason) = sparse_reason(&kept_table, config)? {
+            return sparse_reconstruction(table, kept, config, timer, reason);
+        }
+        // 2. Robust pass (affine): outlier tracks, gross entries, other rigid objects.
+        let mut selection = robust_stage(&kept, config, &mut timer, &mut warnings)?;
+        // 3. Fit of the selected tracks: affine factorization, metric upgrade, refinement,
+        //    and the projective stages for the projective and perspective cameras.
+        let mut fitted = fit_selection(&kept, &selection, config, &mut timer)?;
+        // 4. The projective model judges the tracks again.
+        if config.camera.is_projective() {
+            fitted = projective_verdict_stage(
+                &kept,
+                &mut selection,
+                fitted,
                 config,
-                timer,
-                reason,
-            );
+                &mut timer,
+                &mut warnings,
+            )?;
         }
-        let meas_all = kept.measurements();
-
-        // Robust pass: outlier tracks and gross entries.
-        let mut robust_report = None;
-        let mut inlier = vec![true; kept.n_tracks()];
-        let mut flagged: Vec<(usize, usize)> = Vec::new();
-        // Other rigid objects the affine pass found (tracks of `kept`).
-        let mut other_groups: Vec<Vec<usize>> = Vec::new();
-        if let Some(rc) = &config.robust {
-            let mut rng = rand::rngs::StdRng::seed_from_u64(config.seed);
-            let t0 = Instant::now();
-            let mut counts = Vec::new();
-            let r = timer.run("robust", |obs| {
-                let mut capture = InlierCapture {
-                    inner: obs,
-                    counts: &mut counts,
-                };
-                robust::robust_filter_observed(&meas_all, rc, &mut rng, &mut capture)
-            })?;
-            let mut other_object_tracks = 0;
-            if let robust::Verdict::NoRigidMajority {
-                reason,
-                inlier_fraction,
-                rival_fraction,
-                min_inlier_fraction,
-            } = &r.verdict
-            {
-                if !config.camera.is_projective() {
-                    return Err(Error::NoRigidMajority {
-                        reason: format!("{reason:?}"),
-                        inlier_fraction: *inlier_fraction,
-                        rival_fraction: *rival_fraction,
-                        min_inlier_fraction: *min_inlier_fraction,
-                    });
-                }
-                // Perspective splits the tracks into affine groups: the projective model
-                // judges them instead, starting from all of them.
-                warnings.push(format!(
-                    "the affine robust pass found no rigid majority ({reason:?}: best group \
-                     {:.0} %, rival {:.0} %); the projective model judges the tracks instead",
-                    100.0 * inlier_fraction,
-                    100.0 * rival_fraction
-                ));
-            } else {
-                inlier.clone_from(&r.inlier_tracks);
-                flagged.clone_from(&r.flagged_entries);
-                if rc.separate_objects
-                    && let Some(model) = &r.model
-                {
-                    // Another rigid object's tracks pass the trimmed track test with many
-                    // entries flagged: find such objects among the rejected and flagged
-                    // tracks and reject their tracks whole.
-                    let mut n_flagged = vec![0usize; kept.n_tracks()];
-                    flagged.iter().for_each(|&(_, p)| n_flagged[p] += 1);
-                    let candidates: Vec<usize> = (0..kept.n_tracks())
-                        .filter(|&p| !inlier[p] || n_flagged[p] > 0)
-                        .collect();
-                    other_groups = crate::segment::other_objects(
-                        &meas_all,
-                        model,
-                        &candidates,
-                        &crate::segment::SegmentConfig::default(),
-                        &mut rng,
-                    )?;
-                    for &p in other_groups.iter().flatten() {
-                        if inlier[p] {
-                            inlier[p] = false;
-                            other_object_tracks += 1;
-                        }
-                    }
-                    flagged.retain(|&(_, p)| inlier[p]);
-                }
-            }
-            let seconds = t0.elapsed().as_secs_f64();
-            let mut report = RobustReport {
-                outlier_tracks: Vec::new(),
-                flagged_entries: Vec::new(),
-                n_inlier_tracks: 0,
-                n_outlier_tracks: 0,
-                n_flagged_entries: 0,
-                noise_sigma_px: r.noise_sigma,
-                threshold_px: r.threshold_px,
-                entry_threshold_px: r.entry_threshold_px,
-                iterations: r.iterations,
-                projective: None,
-                inliers_per_iteration: counts,
-                flagged_indices: Vec::new(),
-                rigid_groups_seen: 1 + other_groups.len(),
-                other_object_tracks,
-                seconds,
-            };
-            report.update(&kept, &kept_frames, &kept_tracks, &inlier, &flagged);
-            robust_report = Some(report);
-        }
-
-        let mut fitted = fit_selection(
-            &kept,
-            &kept_frames,
-            &kept_tracks,
-            &inlier,
-            &flagged,
-            config,
-            &mut timer,
-        )?;
-
-        // The projective model judges the tracks again (the affine pass cannot explain
-        // perspective), refitting while its verdict changes (at most
-        // `PROJECTIVE_VERDICT_ROUNDS` times).
-        if let (Some(rc), Some(report)) = (&config.robust, robust_report.as_mut())
-            && config.camera.is_projective()
-        {
-            let before = inlier.clone();
-            let flagged_before = flagged.len();
-            let mut refits = 0;
-            let mut last = None;
-            while let Some(pf) = &fitted.projective {
-                let v = projective_verdict(&kept, &fitted, pf, &flagged, rc);
-                let changed = v.0 != inlier || v.1 != flagged;
-                last = Some((v.2, v.3));
-                if !changed || refits == PROJECTIVE_VERDICT_ROUNDS {
-                    break;
-                }
-                let n_in = v.0.iter().filter(|&&b| b).count();
-                if n_in < 7 {
-                    warnings.push(format!(
-                        "the projective verdict keeps {n_in} track(s): too few to refit; the \
-                         previous selection is kept"
-                    ));
-                    break;
-                }
-                inlier = v.0;
-                flagged = v.1;
-                fitted = fit_selection(
-                    &kept,
-                    &kept_frames,
-                    &kept_tracks,
-                    &inlier,
-                    &flagged,
-                    config,
-                    &mut timer,
-                )?;
-                refits += 1;
-            }
-            let n_in = inlier.iter().filter(|&&b| b).count();
-            let fraction = n_in as f64 / inlier.len().max(1) as f64;
-            if fraction < rc.min_inlier_fraction {
-                return Err(Error::NoRigidMajority {
-                    reason: "projective verdict".into(),
-                    inlier_fraction: fraction,
-                    rival_fraction: 0.0,
-                    min_inlier_fraction: rc.min_inlier_fraction,
-                });
-            }
-            let (sigma, tau) = last.unwrap_or((f64::NAN, f64::NAN));
-            report.update(&kept, &kept_frames, &kept_tracks, &inlier, &flagged);
-            // A group the projective model mostly readmits was a part of the body seen in
-            // perspective, not another object.
-            for g in &other_groups {
-                let back = g.iter().filter(|&&p| inlier[p]).count();
-                if 2 * back > g.len() {
-                    report.rigid_groups_seen -= 1;
-                }
-                report.other_object_tracks -= g
-                    .iter()
-                    .filter(|&&p| inlier[p] && !before[p])
-                    .count()
-                    .min(report.other_object_tracks);
-            }
-            report.noise_sigma_px = sigma;
-            report.entry_threshold_px = tau;
-            report.projective = Some(ProjectiveJudgement {
-                readmitted_tracks: (0..inlier.len())
-                    .filter(|&p| inlier[p] && !before[p])
-                    .count(),
-                rejected_tracks: (0..inlier.len())
-                    .filter(|&p| !inlier[p] && before[p])
-                    .count(),
-                flagged_before,
-                flagged_after: flagged.len(),
-                noise_sigma_px: sigma,
-                entry_threshold_px: tau,
-                refits,
-            });
-        }
-        if let Some(r) = &robust_report
+        if let Some(r) = &selection.report
             && (r.n_outlier_tracks > 0 || r.n_flagged_entries > 0)
         {
             warnings.push(format!(
@@ -1210,255 +1040,26 @@ impl Reconstruction {
                 if r.n_flagged_entries == 1 { "y" } else { "ies" }
             ));
         }
-        let Fitted {
-            fit,
-            meas,
-            set_aside: aside2,
-            fit_frames,
-            used_frames,
-            used_tracks,
-            outlier_kept,
-            affine,
-            completion_report,
-            upgrade,
-            model,
-            refinement,
-            mirrored,
-            projective,
-            rank_ratio,
-            rank_source,
-            warnings: fit_warnings,
-            ..
-        } = fitted;
-        set_aside.extend(aside2);
-        warnings.extend(set_aside_warning(&set_aside));
-        warnings.extend(fit_warnings);
-        let affine_prediction = Mat::from_fn(affine.m_hat.nrows(), affine.s_hat.ncols(), |r, p| {
-            let mut v = affine.t[r];
-            for k in 0..affine.m_hat.ncols() {
-                v += affine.m_hat[(r, k)] * affine.s_hat[(k, p)];
-            }
-            v
-        });
-        let metric_rms_px = model.rms(&meas);
-
-        // Outlier tracks: affine and metric points from their own observations in the used
-        // frames, given the fitted cameras (for display and completed.txt; not in the fit).
-        let outlier_meas = {
-            let t = kept.select(&fit_frames, &outlier_kept);
-            t.measurements()
-        };
-        let outlier_affine = affine_points(&outlier_meas, &affine);
-        let outlier_prediction = Mat::from_fn(affine.m_hat.nrows(), outlier_kept.len(), |r, p| {
-            affine.t[r]
-                + (0..3)
-                    .map(|k| affine.m_hat[(r, k)] * outlier_affine[(k, p)])
-                    .sum::<f64>()
-        });
-        let mut outlier_model = MetricModel {
-            rotations: model.rotations.clone(),
-            translations: model.translations.clone(),
-            scales: model.scales.clone(),
-            points: vec![Vector3::repeat(f64::NAN); outlier_kept.len()],
-        };
-        outlier_model.triangulate(&outlier_meas);
-        // With the automatic choice, a first test against the projective fit (already made):
-        // when even its 5F extra parameters do not explain the tracks significantly better
-        // than the scaled orthographic camera, the perspective stages are skipped.
-        let mut pre_selection = None;
-        if config.camera == CameraModel::Auto
-            && let Some(pf) = &projective
-        {
-            let sel = ModelSelection::pretest(
-                metric_rms_px,
-                pf.rms_px,
-                meas.n_observed(),
-                meas.n_frames(),
-                meas.n_points(),
-            );
-            if sel.chosen != CameraModel::Perspective {
-                pre_selection = Some(sel);
-            }
-        }
-        let perspective = match &projective {
-            Some(pf) if config.camera.is_perspective() && pre_selection.is_none() => {
-                let per = timer.run("perspective", |obs| {
-                    perspective::fit(&meas, &pf.model, Some(&model), &config.perspective, 0, obs)
-                });
-                let per = match per {
-                    Ok(p) => Some(p),
-                    // With the automatic choice the affine model stands in.
-                    Err(e) if config.camera == CameraModel::Auto => {
-                        warnings.push(format!(
-                            "the perspective camera could not be fitted ({e}); the scaled \
-                             orthographic camera is kept"
-                        ));
-                        None
-                    }
-                    Err(e) => return Err(e),
-                };
-                per.map(|per| {
-                    for st in &per.stages {
-                        if st.status == SolverStatus::Stalled {
-                            warnings.push(format!(
-                                "perspective stage {} stalled after {} iterations",
-                                st.stage, st.iterations
-                            ));
-                        }
-                    }
-                    if per.in_front < 0.95 {
-                        warnings.push(format!(
-                            "only {:.1} % of the observations are in front of their camera after \
-                         the Euclidean upgrade: the self-calibration is unreliable (weak \
-                         perspective or degenerate motion)",
-                            100.0 * per.in_front
-                        ));
-                    }
-                    PerspectiveResult::new(
-                        per,
-                        &config.perspective,
-                        &fit,
-                        &meas,
-                        &outlier_meas,
-                        &outlier_kept,
-                        &kept,
-                        &kept_tracks,
-                        &used_tracks,
-                    )
-                })
-            }
-            _ => None,
-        };
-        let mut perspective = perspective;
-        let mut projective = projective;
-        let mut camera_model = config.camera;
-        let mut model_selection = None;
-        if let Some(sel) = pre_selection {
-            camera_model = sel.chosen;
-            perspective = None;
-            projective = None;
-            model_selection = Some(sel);
-        } else if config.camera == CameraModel::Auto {
-            let sel = ModelSelection::judge(
-                metric_rms_px,
-                perspective.as_ref(),
-                meas.n_observed(),
-                meas.n_frames(),
-                meas.n_points(),
-            );
-            camera_model = sel.chosen;
-            if sel.chosen != CameraModel::Perspective {
-                perspective = None;
-                projective = None;
-            }
-            model_selection = Some(sel);
-        }
-        if let Some(p) = &perspective {
-            let side = p.intrinsics.image_size.map_or(
-                2.0 * p.intrinsics.principal_point[0].max(p.intrinsics.principal_point[1]),
-                |[w, h]| w.max(h) as f64,
-            );
-            if p.intrinsics.focal_px > 20.0 * side {
-                warnings.push(format!(
-                    "focal length {:.0} px, over 20 times the image size: the data are close \
-                     to weak perspective and the focal length is poorly determined",
-                    p.intrinsics.focal_px
-                ));
-            }
-        }
-        let projective = projective.map(|pf| {
-            ProjectiveResult::new(
-                pf,
-                &fit,
-                &meas,
-                &outlier_meas,
-                &outlier_kept,
-                &kept,
-                &kept_tracks,
-                &used_tracks,
-            )
-        });
-
-        for w in &warnings {
-            timer.observer.on_event(&Event::Warning { message: w });
-        }
-        let frames = (0..fit.n_frames())
-            .map(|f| {
-                let (ss, n) = frame_residuals(&metric_predictor(&model), &meas, f);
-                let r = model.rotations[f].matrix();
-                FrameResult {
-                    frame: fit.frame_ids()[f].clone(),
-                    rotation: std::array::from_fn(|a| std::array::from_fn(|b| r[(a, b)])),
-                    translation: [model.translations[f][0], model.translations[f][1]],
-                    scale: model.scales[f],
-                    rms_px: rms_of(ss, n),
-                    n_observations: n,
-                }
-            })
-            .collect();
-        let points = point_results(
-            &TrackSets {
-                fit: &fit,
-                meas: &meas,
-                used_tracks: &used_tracks,
-                kept: &kept,
-                kept_tracks: &kept_tracks,
-                outlier_kept: &outlier_kept,
-                outlier_meas: &outlier_meas,
-            },
-            (&metric_predictor(&model), |p| model.points[p]),
-            (&metric_predictor(&outlier_model), |k| {
-                outlier_model.points[k]
-            }),
-        );
-        let outlier_tracks_input: Vec<usize> =
-            outlier_kept.iter().map(|&p| kept_tracks[p]).collect();
-        Ok(Reconstruction {
-            camera_model,
-            model_selection,
-            frames,
-            points,
-            rms_px: match (&perspective, &projective) {
-                (Some(p), _) => p.rms_px,
-                (None, Some(p)) => p.rms_px,
-                _ => metric_rms_px,
-            },
-            metric_rms_px,
-            metric_upgrade: upgrade,
-            rank_ratio,
-            rank_ratio_source: rank_source,
-            singular_values: affine.singular_values,
-            factorization: affine.report,
-            completion: completion_report,
-            robust: robust_report,
-            refinement,
-            projective,
-            perspective,
-            input: InputSummary {
-                frames: table.n_frames(),
-                tracks: table.n_tracks(),
-                observations: table.n_observed(),
-                fill: table.fill(),
-                frames_used: fit.n_frames(),
-                tracks_used: fit.n_tracks(),
-            },
-            set_aside,
-            mirrored,
-            warnings,
-            timings: timer.timings,
-            mesh: None,
-            sparse: None,
-            model,
-            affine_structure: affine.s_hat.clone(),
-            affine_prediction,
-            outlier_prediction,
-            outlier_model,
-            kept_frames: used_frames,
-            kept_tracks: used_tracks,
-            outlier_tracks: outlier_tracks_input,
-            input_frame_ids: table.frame_ids().to_vec(),
-            input_track_ids: table.track_ids().to_vec(),
-        })
+        // Tracks and frames the selection starved, and the fit's warnings.
+        let mut kept = kept;
+        kept.set_aside.append(&mut fitted.set_aside);
+        warnings.extend(set_aside_warning(&kept.set_aside));
+        warnings.append(&mut fitted.warnings);
+        // 5. The outlier tracks given the fitted cameras (for display and completed.txt).
+        let outliers = OutlierTracks::of(&kept_table, &fitted);
+        // 6. The camera model: the perspective stages, and the automatic choice.
+        let choice = camera_stage(
+            &kept,
+            &mut fitted,
+            &outliers,
+            config,
+            &mut timer,
+            &mut warnings,
+        )?;
+        // 7. The result.
+        Ok(assemble(
+            table, kept, selection, fitted, outliers, choice, timer, warnings,
+        ))
     }
 
     /// The fit's prediction laid out like the input table (2F×N in the input's frame and
@@ -1530,6 +1131,541 @@ impl Reconstruction {
 }
 
 /// What [`fit_selection`] produced: the fit table and every model fitted to it.
+/// The tracks the fit uses and why: the robust pass's verdict (affine, then the projective
+/// model's) as the stages refine it.
+struct Selection {
+    /// Per kept track: used by the fit.
+    inlier: Vec<bool>,
+    /// Gross entries (frame, track) of the kept table, hidden from the fit.
+    flagged: Vec<(usize, usize)>,
+    /// Other rigid objects the affine pass found (tracks of the kept table).
+    other_groups: Vec<Vec<usize>>,
+    /// `None` when the robust pass is off.
+    report: Option<RobustReport>,
+}
+
+/// Stage 2, the affine robust pass ([`crate::robust`]): RANSAC over rigid hypotheses, the
+/// trimmed track test and the gross-entry flags, then other rigid objects among the
+/// rejected and flagged tracks ([`crate::segment::other_objects`]) rejected whole. Without a
+/// rigid majority the affine cameras stop ([`Error::NoRigidMajority`]); the projective ones
+/// go on with every track, for the projective verdict to judge. Cost: the robust pass's
+/// (see [`crate::robust`]).
+fn robust_stage(
+    kept: &Kept<'_>,
+    config: &Config,
+    timer: &mut Timer<'_>,
+    warnings: &mut Vec<String>,
+) -> Result<Selection> {
+    let n = kept.table.n_tracks();
+    let mut sel = Selection {
+        inlier: vec![true; n],
+        flagged: Vec::new(),
+        other_groups: Vec::new(),
+        report: None,
+    };
+    let Some(rc) = &config.robust else {
+        return Ok(sel);
+    };
+    let meas_all = kept.table.measurements();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(config.seed);
+    let t0 = Instant::now();
+    let mut counts = Vec::new();
+    let r = timer.run("robust", |obs| {
+        let mut capture = InlierCapture {
+            inner: obs,
+            counts: &mut counts,
+        };
+        robust::robust_filter_observed(&meas_all, rc, &mut rng, &mut capture)
+    })?;
+    let mut other_object_tracks = 0;
+    if let robust::Verdict::NoRigidMajority {
+        reason,
+        inlier_fraction,
+        rival_fraction,
+        min_inlier_fraction,
+    } = &r.verdict
+    {
+        if !config.camera.is_projective() {
+            return Err(Error::NoRigidMajority {
+                reason: format!("{reason:?}"),
+                inlier_fraction: *inlier_fraction,
+                rival_fraction: *rival_fraction,
+                min_inlier_fraction: *min_inlier_fraction,
+            });
+        }
+        // Perspective splits the tracks into affine groups: the projective model judges
+        // them instead, starting from all of them.
+        warnings.push(format!(
+            "the affine robust pass found no rigid majority ({reason:?}: best group \
+             {:.0} %, rival {:.0} %); the projective model judges the tracks instead",
+            100.0 * inlier_fraction,
+            100.0 * rival_fraction
+        ));
+    } else {
+        sel.inlier.clone_from(&r.inlier_tracks);
+        sel.flagged.clone_from(&r.flagged_entries);
+        if rc.separate_objects
+            && let Some(model) = &r.model
+        {
+            // Another rigid object's tracks pass the trimmed track test with many entries
+            // flagged: find such objects among the rejected and flagged tracks and reject
+            // their tracks whole.
+            let mut n_flagged = vec![0usize; n];
+            sel.flagged.iter().for_each(|&(_, p)| n_flagged[p] += 1);
+            let candidates: Vec<usize> = (0..n)
+                .filter(|&p| !sel.inlier[p] || n_flagged[p] > 0)
+                .collect();
+            sel.other_groups = crate::segment::other_objects(
+                &meas_all,
+                model,
+                &candidates,
+                &crate::segment::SegmentConfig::default(),
+                &mut rng,
+            )?;
+            for &p in sel.other_groups.iter().flatten() {
+                if sel.inlier[p] {
+                    sel.inlier[p] = false;
+                    other_object_tracks += 1;
+                }
+            }
+            let inlier = &sel.inlier;
+            sel.flagged.retain(|&(_, p)| inlier[p]);
+        }
+    }
+    let mut report = RobustReport {
+        outlier_tracks: Vec::new(),
+        flagged_entries: Vec::new(),
+        n_inlier_tracks: 0,
+        n_outlier_tracks: 0,
+        n_flagged_entries: 0,
+        noise_sigma_px: r.noise_sigma,
+        threshold_px: r.threshold_px,
+        entry_threshold_px: r.entry_threshold_px,
+        iterations: r.iterations,
+        projective: None,
+        inliers_per_iteration: counts,
+        flagged_indices: Vec::new(),
+        rigid_groups_seen: 1 + sel.other_groups.len(),
+        other_object_tracks,
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    report.update(
+        kept.table,
+        &kept.frames,
+        &kept.tracks,
+        &sel.inlier,
+        &sel.flagged,
+    );
+    sel.report = Some(report);
+    Ok(sel)
+}
+
+/// Stage 4, the projective verdict: the projective model judges every kept track again
+/// (the affine pass cannot explain perspective, and blames the tracks for it), and the
+/// selection is refitted while the verdict changes, at most `PROJECTIVE_VERDICT_ROUNDS`
+/// times. Fewer than `min_inlier_fraction` of the tracks kept is
+/// [`Error::NoRigidMajority`]. Each refit costs a [`fit_selection`].
+fn projective_verdict_stage(
+    kept: &Kept<'_>,
+    sel: &mut Selection,
+    mut fitted: Fitted,
+    config: &Config,
+    timer: &mut Timer<'_>,
+    warnings: &mut Vec<String>,
+) -> Result<Fitted> {
+    let (Some(rc), Some(mut report)) = (&config.robust, sel.report.take()) else {
+        return Ok(fitted);
+    };
+    let before = sel.inlier.clone();
+    let flagged_before = sel.flagged.len();
+    let mut refits = 0;
+    let mut last = None;
+    while let Some(pf) = &fitted.projective {
+        let v = projective_verdict(kept.table, &fitted, pf, &sel.flagged, rc);
+        let changed = v.0 != sel.inlier || v.1 != sel.flagged;
+        last = Some((v.2, v.3));
+        if !changed || refits == PROJECTIVE_VERDICT_ROUNDS {
+            break;
+        }
+        let n_in = v.0.iter().filter(|&&b| b).count();
+        if n_in < 7 {
+            warnings.push(format!(
+                "the projective verdict keeps {n_in} track(s): too few to refit; the \
+                 previous selection is kept"
+            ));
+            break;
+        }
+        sel.inlier = v.0;
+        sel.flagged = v.1;
+        fitted = fit_selection(kept, sel, config, timer)?;
+        refits += 1;
+    }
+    let inlier = &sel.inlier;
+    let n_in = inlier.iter().filter(|&&b| b).count();
+    let fraction = n_in as f64 / inlier.len().max(1) as f64;
+    if fraction < rc.min_inlier_fraction {
+        return Err(Error::NoRigidMajority {
+            reason: "projective verdict".into(),
+            inlier_fraction: fraction,
+            rival_fraction: 0.0,
+            min_inlier_fraction: rc.min_inlier_fraction,
+        });
+    }
+    let (sigma, tau) = last.unwrap_or((f64::NAN, f64::NAN));
+    report.update(kept.table, &kept.frames, &kept.tracks, inlier, &sel.flagged);
+    // A group the projective model mostly readmits was a part of the body seen in
+    // perspective, not another object.
+    for g in &sel.other_groups {
+        let back = g.iter().filter(|&&p| inlier[p]).count();
+        if 2 * back > g.len() {
+            report.rigid_groups_seen -= 1;
+        }
+        report.other_object_tracks -= g
+            .iter()
+            .filter(|&&p| inlier[p] && !before[p])
+            .count()
+            .min(report.other_object_tracks);
+    }
+    report.noise_sigma_px = sigma;
+    report.entry_threshold_px = tau;
+    report.projective = Some(ProjectiveJudgement {
+        readmitted_tracks: (0..inlier.len())
+            .filter(|&p| inlier[p] && !before[p])
+            .count(),
+        rejected_tracks: (0..inlier.len())
+            .filter(|&p| !inlier[p] && before[p])
+            .count(),
+        flagged_before,
+        flagged_after: sel.flagged.len(),
+        noise_sigma_px: sigma,
+        entry_threshold_px: tau,
+        refits,
+    });
+    sel.report = Some(report);
+    Ok(fitted)
+}
+
+/// The outlier tracks given the fitted cameras: their affine and metric points from their
+/// own observations in the fit's frames (for display and completed.txt; not in the fit).
+/// `O(observations of the outlier tracks)` plus their `2F × n_outliers` prediction.
+struct OutlierTracks {
+    meas: Measurements,
+    /// Affine prediction `M̂ Ŝ_outliers + t`, 2F × n_outliers.
+    prediction: Mat<f64>,
+    model: MetricModel,
+}
+
+impl OutlierTracks {
+    fn of(kept: &TrackTable, fitted: &Fitted) -> OutlierTracks {
+        let affine = &fitted.affine;
+        let meas = kept
+            .select(&fitted.fit_frames, &fitted.outlier_kept)
+            .measurements();
+        let points = affine_points(&meas, affine);
+        let prediction = Mat::from_fn(affine.m_hat.nrows(), fitted.outlier_kept.len(), |r, p| {
+            affine.t[r]
+                + (0..3)
+                    .map(|k| affine.m_hat[(r, k)] * points[(k, p)])
+                    .sum::<f64>()
+        });
+        let mut model = MetricModel {
+            rotations: fitted.model.rotations.clone(),
+            translations: fitted.model.translations.clone(),
+            scales: fitted.model.scales.clone(),
+            points: vec![Vector3::repeat(f64::NAN); fitted.outlier_kept.len()],
+        };
+        model.triangulate(&meas);
+        OutlierTracks {
+            meas,
+            prediction,
+            model,
+        }
+    }
+}
+
+/// The camera model of the result and its fits.
+struct CameraChoice {
+    camera_model: CameraModel,
+    model_selection: Option<ModelSelection>,
+    perspective: Option<PerspectiveResult>,
+    projective: Option<ProjectiveResult>,
+}
+
+/// Stage 6, the camera model: with the perspective camera the metric perspective stages
+/// ([`perspective::fit`] from the projective fit); with the automatic choice first a
+/// pre-test of the projective fit against the scaled orthographic one (when even its 5F
+/// extra parameters do not explain the tracks significantly better, the perspective stages
+/// are skipped), then the judgement of the perspective fit ([`ModelSelection`]). Takes the
+/// projective fit out of `fitted`.
+fn camera_stage(
+    kept: &Kept<'_>,
+    fitted: &mut Fitted,
+    outliers: &OutlierTracks,
+    config: &Config,
+    timer: &mut Timer<'_>,
+    warnings: &mut Vec<String>,
+) -> Result<CameraChoice> {
+    let meas = &fitted.meas;
+    let metric_rms_px = fitted.model.rms(meas);
+    let mut projective = fitted.projective.take();
+    let mut pre_selection = None;
+    if config.camera == CameraModel::Auto
+        && let Some(pf) = &projective
+    {
+        let sel = ModelSelection::pretest(
+            metric_rms_px,
+            pf.rms_px,
+            meas.n_observed(),
+            meas.n_frames(),
+            meas.n_points(),
+        );
+        if sel.chosen != CameraModel::Perspective {
+            pre_selection = Some(sel);
+        }
+    }
+    let mut perspective = match &projective {
+        Some(pf) if config.camera.is_perspective() && pre_selection.is_none() => {
+            let per = timer.run("perspective", |obs| {
+                perspective::fit(
+                    meas,
+                    &pf.model,
+                    Some(&fitted.model),
+                    &config.perspective,
+                    0,
+                    obs,
+                )
+            });
+            let per = match per {
+                Ok(p) => Some(p),
+                // With the automatic choice the affine model stands in.
+                Err(e) if config.camera == CameraModel::Auto => {
+                    warnings.push(format!(
+                        "the perspective camera could not be fitted ({e}); the scaled \
+                         orthographic camera is kept"
+                    ));
+                    None
+                }
+                Err(e) => return Err(e),
+            };
+            per.map(|per| {
+                for st in &per.stages {
+                    if st.status == SolverStatus::Stalled {
+                        warnings.push(format!(
+                            "perspective stage {} stalled after {} iterations",
+                            st.stage, st.iterations
+                        ));
+                    }
+                }
+                if per.in_front < 0.95 {
+                    warnings.push(format!(
+                        "only {:.1} % of the observations are in front of their camera after \
+                         the Euclidean upgrade: the self-calibration is unreliable (weak \
+                         perspective or degenerate motion)",
+                        100.0 * per.in_front
+                    ));
+                }
+                PerspectiveResult::new(
+                    per,
+                    &config.perspective,
+                    &fitted.fit,
+                    meas,
+                    &outliers.meas,
+                    &fitted.outlier_kept,
+                    kept.table,
+                    &kept.tracks,
+                    &fitted.used_tracks,
+                )
+            })
+        }
+        _ => None,
+    };
+    let mut camera_model = config.camera;
+    let mut model_selection = None;
+    if let Some(sel) = pre_selection {
+        camera_model = sel.chosen;
+        perspective = None;
+        projective = None;
+        model_selection = Some(sel);
+    } else if config.camera == CameraModel::Auto {
+        let sel = ModelSelection::judge(
+            metric_rms_px,
+            perspective.as_ref(),
+            meas.n_observed(),
+            meas.n_frames(),
+            meas.n_points(),
+        );
+        camera_model = sel.chosen;
+        if sel.chosen != CameraModel::Perspective {
+            perspective = None;
+            projective = None;
+        }
+        model_selection = Some(sel);
+    }
+    if let Some(p) = &perspective {
+        let side = p.intrinsics.image_size.map_or(
+            2.0 * p.intrinsics.principal_point[0].max(p.intrinsics.principal_point[1]),
+            |[w, h]| w.max(h) as f64,
+        );
+        if p.intrinsics.focal_px > 20.0 * side {
+            warnings.push(format!(
+                "focal length {:.0} px, over 20 times the image size: the data are close to \
+                 weak perspective and the focal length is poorly determined",
+                p.intrinsics.focal_px
+            ));
+        }
+    }
+    let projective = projective.map(|pf| {
+        ProjectiveResult::new(
+            pf,
+            &fitted.fit,
+            meas,
+            &outliers.meas,
+            &fitted.outlier_kept,
+            kept.table,
+            &kept.tracks,
+            &fitted.used_tracks,
+        )
+    });
+    Ok(CameraChoice {
+        camera_model,
+        model_selection,
+        perspective,
+        projective,
+    })
+}
+
+/// Stage 7, the [`Reconstruction`]: per-frame and per-point results (residuals in the
+/// input's ids), the reports of every stage, the warnings (also sent to the observer) and
+/// the dense predictions. `O(F·N)` for the predictions.
+#[allow(clippy::too_many_arguments)]
+fn assemble(
+    table: &TrackTable,
+    kept: Kept<'_>,
+    selection: Selection,
+    fitted: Fitted,
+    outliers: OutlierTracks,
+    choice: CameraChoice,
+    timer: Timer<'_>,
+    warnings: Vec<String>,
+) -> Reconstruction {
+    let Kept {
+        table: kept_table,
+        tracks: kept_tracks,
+        set_aside,
+        ..
+    } = kept;
+    let Fitted {
+        fit,
+        meas,
+        used_frames,
+        used_tracks,
+        outlier_kept,
+        affine,
+        completion_report,
+        upgrade,
+        model,
+        refinement,
+        mirrored,
+        rank_ratio,
+        rank_source,
+        ..
+    } = fitted;
+    let CameraChoice {
+        camera_model,
+        model_selection,
+        perspective,
+        projective,
+    } = choice;
+    for w in &warnings {
+        timer.observer.on_event(&Event::Warning { message: w });
+    }
+    let metric_rms_px = model.rms(&meas);
+    let affine_prediction = Mat::from_fn(affine.m_hat.nrows(), affine.s_hat.ncols(), |r, p| {
+        let mut v = affine.t[r];
+        for k in 0..affine.m_hat.ncols() {
+            v += affine.m_hat[(r, k)] * affine.s_hat[(k, p)];
+        }
+        v
+    });
+    let frames = (0..fit.n_frames())
+        .map(|f| {
+            let (ss, n) = frame_residuals(&metric_predictor(&model), &meas, f);
+            let r = model.rotations[f].matrix();
+            FrameResult {
+                frame: fit.frame_ids()[f].clone(),
+                rotation: std::array::from_fn(|a| std::array::from_fn(|b| r[(a, b)])),
+                translation: [model.translations[f][0], model.translations[f][1]],
+                scale: model.scales[f],
+                rms_px: rms_of(ss, n),
+                n_observations: n,
+            }
+        })
+        .collect();
+    let outlier_model = outliers.model;
+    let points = point_results(
+        &TrackSets {
+            fit: &fit,
+            meas: &meas,
+            used_tracks: &used_tracks,
+            kept: kept_table,
+            kept_tracks: &kept_tracks,
+            outlier_kept: &outlier_kept,
+            outlier_meas: &outliers.meas,
+        },
+        (&metric_predictor(&model), |p| model.points[p]),
+        (&metric_predictor(&outlier_model), |k| {
+            outlier_model.points[k]
+        }),
+    );
+    let outlier_tracks: Vec<usize> = outlier_kept.iter().map(|&p| kept_tracks[p]).collect();
+    Reconstruction {
+        camera_model,
+        model_selection,
+        frames,
+        points,
+        rms_px: match (&perspective, &projective) {
+            (Some(p), _) => p.rms_px,
+            (None, Some(p)) => p.rms_px,
+            _ => metric_rms_px,
+        },
+        metric_rms_px,
+        metric_upgrade: upgrade,
+        rank_ratio,
+        rank_ratio_source: rank_source,
+        singular_values: affine.singular_values,
+        factorization: affine.report,
+        completion: completion_report,
+        robust: selection.report,
+        refinement,
+        projective,
+        perspective,
+        input: InputSummary {
+            frames: table.n_frames(),
+            tracks: table.n_tracks(),
+            observations: table.n_observed(),
+            fill: table.fill(),
+            frames_used: fit.n_frames(),
+            tracks_used: fit.n_tracks(),
+        },
+        set_aside,
+        mirrored,
+        warnings,
+        timings: timer.timings,
+        mesh: None,
+        sparse: None,
+        model,
+        affine_structure: affine.s_hat,
+        affine_prediction,
+        outlier_prediction: outliers.prediction,
+        outlier_model,
+        kept_frames: used_frames,
+        kept_tracks: used_tracks,
+        outlier_tracks,
+        input_frame_ids: table.frame_ids().to_vec(),
+        input_track_ids: table.track_ids().to_vec(),
+    }
+}
+
 struct Fitted {
     fit: TrackTable,
     meas: Measurements,
@@ -1564,14 +1700,14 @@ struct Fitted {
 /// projective stages ([`crate::projective`]).
 #[allow(clippy::too_many_arguments)]
 fn fit_selection(
-    kept: &TrackTable,
-    kept_frames: &[usize],
-    kept_tracks: &[usize],
-    inlier: &[bool],
-    flagged: &[(usize, usize)],
+    kept: &Kept<'_>,
+    selection: &Selection,
     config: &Config,
     timer: &mut Timer<'_>,
 ) -> Result<Fitted> {
+    let (kept_frames, kept_tracks) = (&kept.frames, &kept.tracks);
+    let (inlier, flagged) = (&selection.inlier, &selection.flagged);
+    let kept = kept.table;
     let mut warnings = Vec::new();
     let affine_camera = config.camera.affine();
     // The table the fit uses: inlier tracks, flagged entries hidden, set aside again
