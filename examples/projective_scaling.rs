@@ -87,17 +87,21 @@ fn one(frames: usize, per_frame: usize, max_iterations: Option<usize>, affine_wi
     let (obs, truth) = table(frames, per_frame, 1);
     let n_tracks = truth.len();
     let t0 = Instant::now();
-    let r = fit_observations(
-        &obs,
-        frames,
-        n_tracks,
-        &config(max_iterations),
-        &WindowConfig {
-            projective: !affine_windows,
-            ..WindowConfig::default()
-        },
-        &mut Printer,
-    );
+    let r = if std::env::var_os("METRIC_START").is_some() {
+        metric_start(&obs, frames, n_tracks, &config(max_iterations))
+    } else {
+        fit_observations(
+            &obs,
+            frames,
+            n_tracks,
+            &config(max_iterations),
+            &WindowConfig {
+                projective: !affine_windows,
+                ..WindowConfig::default()
+            },
+            &mut Printer,
+        )
+    };
     let seconds = t0.elapsed().as_secs_f64();
     match r {
         Ok(fit) => {
@@ -118,6 +122,51 @@ fn one(frames: usize, per_frame: usize, max_iterations: Option<usize>, affine_wi
         }
         Err(e) => println!("{frames}\t{n_tracks}\t{}\terror: {e}", obs.len()),
     }
+}
+
+/// Experiment: the projective adjustment started from the metric chain's cameras `K[R|t]`.
+fn metric_start(
+    obs: &[Observation],
+    frames: usize,
+    n_tracks: usize,
+    cfg: &ProjectiveConfig,
+) -> rank3::Result<rank3::projective::ProjectiveFit> {
+    let mut pcfg = PerspectiveConfig::default();
+    pcfg.intrinsics.image_size = Some([640, 480]);
+    let t0 = Instant::now();
+    let m = rank3::perspective::fit_observations(
+        obs,
+        frames,
+        n_tracks,
+        &pcfg,
+        cfg,
+        &WindowConfig::default(),
+        &mut Printer,
+    )?;
+    let metric_s = t0.elapsed().as_secs_f64();
+    let start = rank3::projective::ProjectiveModel {
+        cameras: (0..frames).map(|f| m.model.camera_matrix(f)).collect(),
+        points: m
+            .model
+            .points
+            .iter()
+            .map(|x| [x[0], x[1], x[2], 1.0])
+            .collect(),
+    };
+    let mut fit =
+        rank3::projective::refine_observations(obs, frames, n_tracks, &start, cfg, &mut Printer)?;
+    fit.stages.insert(
+        0,
+        rank3::projective::StageReport {
+            stage: format!("metric ({} it, rms {:.4})", m.report.iterations, m.rms_px),
+            status: m.report.status,
+            iterations: m.report.iterations,
+            rms_before_px: f64::NAN,
+            rms_after_px: m.rms_px,
+            seconds: metric_s,
+        },
+    );
+    Ok(fit)
 }
 
 /// One size through the perspective chain ([`rank3::perspective::fit_observations`]:

@@ -848,6 +848,71 @@ pub fn refine(
     )
 }
 
+/// [`refine`] for a sparse table of observations (`n_frames` frames, `n_tracks` tracks): the
+/// projective bundle adjustment from a given model (`start.cameras` one per frame,
+/// `start.points` one per track, pixel coordinates), e.g. the projective cameras
+/// `K [R | t]` of a metric reconstruction. Cost and memory as [`fit_observations`]'s
+/// adjustment: linear in the observations for a banded camera graph.
+///
+/// Errors: as [`fit_observations`] for the observations; [`Error::Dimension`] for a start
+/// of the wrong size; [`Error::Degenerate`] for a non-finite start.
+pub fn refine_observations(
+    obs: &[Observation],
+    n_frames: usize,
+    n_tracks: usize,
+    start: &ProjectiveModel,
+    cfg: &ProjectiveConfig,
+    observer: &mut dyn Observer,
+) -> Result<ProjectiveFit> {
+    cfg.validate()?;
+    if start.cameras.len() != n_frames || start.points.len() != n_tracks {
+        return Err(Error::Dimension {
+            context: "projective refine: start model",
+            expected: format!("{n_frames} cameras, {n_tracks} points"),
+            got: format!(
+                "{} cameras, {} points",
+                start.cameras.len(),
+                start.points.len()
+            ),
+        });
+    }
+    if start.cameras.iter().flatten().any(|v| !v.is_finite())
+        || start.points.iter().flatten().any(|v| !v.is_finite())
+    {
+        return Err(Error::Degenerate(
+            "projective refine: the start model has a non-finite camera or point".into(),
+        ));
+    }
+    let order = observation_order(obs, n_frames, n_tracks)?;
+    let norm = Normalization::of_points(|| obs.iter().map(|o| o.xy));
+    let g = observation_graph(obs, &order, n_frames, n_tracks, &norm);
+    drop(order);
+    check_graph(&g)?;
+    let mut cams = Vec::with_capacity(12 * n_frames);
+    for c in &start.cameras {
+        let mut n = norm.camera_to_normalized(c);
+        bundle::normalize(&mut n);
+        cams.extend(n);
+    }
+    let mut pts = Vec::with_capacity(4 * n_tracks);
+    for x in &start.points {
+        let mut v = *x;
+        bundle::normalize(&mut v);
+        pts.extend_from_slice(&v);
+    }
+    bundle_adjust(
+        &g,
+        &norm,
+        cams,
+        pts,
+        Start::Given,
+        Vec::new(),
+        cfg,
+        0,
+        observer,
+    )
+}
+
 /// The projective bundle adjustment stage shared by [`fit`] and [`refine`]: cameras and
 /// points in normalized coordinates on their unit spheres.
 #[allow(clippy::too_many_arguments)]
