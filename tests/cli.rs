@@ -1011,3 +1011,193 @@ fn oversized_inputs_are_refused_or_degrade_gracefully() {
         json["rms_px"]
     );
 }
+
+/// Runs `cmd`: exit code, stdout, stderr.
+fn outputs(cmd: &mut std::process::Command) -> (Option<i32>, String, String) {
+    let out = cmd.output().unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// `-q` prints nothing on a clean success (warnings and errors only), before or after the
+/// subcommand; `-v` prints more than the default; errors print at every level (exit 1);
+/// `eval`'s scores are its output and stay on stdout with `-q`.
+#[test]
+fn quiet_and_verbose_output_levels() {
+    let d = tmp("verbosity");
+    let (code, out, err) = outputs(
+        bin()
+            .args(["synth", "-q", "--frames", "10", "--points", "40", "--out"])
+            .arg(&d),
+    );
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!((out.as_str(), err.as_str()), ("", ""));
+    assert!(d.join("tracks.csv").exists() && d.join("truth.json").exists());
+    let reconstruct = |level: Option<&str>, out: &str| {
+        let mut cmd = bin();
+        cmd.args(level)
+            .arg("reconstruct")
+            .arg(d.join("tracks.csv"))
+            .arg("--out")
+            .arg(d.join(out))
+            .args(["--camera", "scaled-orthographic"]);
+        outputs(&mut cmd)
+    };
+    let (code, out, err) = reconstruct(Some("-q"), "quiet");
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!((out.as_str(), err.as_str()), ("", ""));
+    assert!(d.join("quiet/reconstruction.json").exists());
+    let (code, out, normal) = reconstruct(None, "normal");
+    assert_eq!(code, Some(0), "{normal}");
+    assert!(
+        out.contains("scaled-orthographic camera, 10 frames"),
+        "{out}"
+    );
+    assert!(normal.contains("singular values") && !normal.contains("time per stage"));
+    let (code, out_v, verbose) = reconstruct(Some("--verbose"), "verbose");
+    assert_eq!(code, Some(0), "{verbose}");
+    assert_eq!(out_v.replace("verbose", "normal"), out);
+    assert!(
+        verbose.lines().count() > normal.lines().count() + 3,
+        "default:\n{normal}\n-v:\n{verbose}"
+    );
+    for line in normal.lines() {
+        assert!(verbose.contains(line.split(" (").next().unwrap()), "{line}");
+    }
+    for detail in [
+        "settings: camera scaled-orthographic",
+        "time per stage (s): ",
+        "wrote ",
+    ] {
+        assert!(verbose.contains(detail), "{detail}:\n{verbose}");
+    }
+
+    // Errors print with -q, exit 1.
+    let bad = d.join("bad.csv");
+    std::fs::write(&bad, "frame,track,x,y\n0,0,1.0,oops\n").unwrap();
+    let (code, out, err) = outputs(
+        bin()
+            .args(["reconstruct", "-q"])
+            .arg(&bad)
+            .arg("--out")
+            .arg(d.join("o")),
+    );
+    assert_eq!(code, Some(1));
+    assert_eq!(out, "");
+    assert!(
+        err.starts_with("error: ") && err.contains("bad.csv:2"),
+        "{err}"
+    );
+
+    // eval's table is its output: printed with -q too.
+    let (code, table, err) = outputs(
+        bin()
+            .args(["-q", "eval"])
+            .arg(d.join("quiet"))
+            .arg("-r")
+            .arg(d.join("truth.json")),
+    );
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(err, "");
+    assert!(!table.is_empty());
+    // -q and -v together are a usage error.
+    let (code, _, err) = outputs(bin().args(["-q", "-v", "synth", "--out"]).arg(&d));
+    assert_eq!(code, Some(2));
+    assert!(
+        err.contains("--quiet") && err.contains("--verbose"),
+        "{err}"
+    );
+}
+
+/// Options that would do nothing in the combination given are refused as usage errors
+/// (exit 2) saying why, before any work.
+#[test]
+fn options_that_do_nothing_are_refused() {
+    let d = tmp("inert-options");
+    let points = d.join("points.txt");
+    std::fs::write(&points, "10 10\n20 20\n").unwrap();
+    let table = d.join("t.csv");
+    std::fs::write(&table, "frame,track,x,y\n0,0,1,2\n").unwrap();
+    let out = d.join("out");
+    let cases: Vec<(Vec<std::ffi::OsString>, &str)> = vec![
+        // Re-detection is always on without --init-points.
+        (
+            vec![
+                "track".into(),
+                d.clone().into(),
+                "--out".into(),
+                d.join("t2.csv").into(),
+                "--redetect".into(),
+            ],
+            "--init-points",
+        ),
+        // Nothing is detected with --init-points alone.
+        (
+            vec![
+                "track".into(),
+                d.clone().into(),
+                "--out".into(),
+                d.join("t2.csv").into(),
+                "--init-points".into(),
+                points.clone().into(),
+                "--quality".into(),
+                "0.1".into(),
+            ],
+            "add --redetect",
+        ),
+        (
+            vec![
+                "reconstruct".into(),
+                table.clone().into(),
+                "--out".into(),
+                out.clone().into(),
+                "--camera".into(),
+                "orthographic".into(),
+                "--focal".into(),
+                "800".into(),
+            ],
+            "--focal is an option of the perspective camera",
+        ),
+        (
+            vec![
+                "reconstruct".into(),
+                table.clone().into(),
+                "--out".into(),
+                out.clone().into(),
+                "--no-mesh".into(),
+            ],
+            "--no-mesh does nothing without --images",
+        ),
+        (
+            vec![
+                "reconstruct".into(),
+                table.clone().into(),
+                "--out".into(),
+                out.clone().into(),
+                "--no-robust".into(),
+                "--threshold".into(),
+                "2".into(),
+            ],
+            "--no-robust",
+        ),
+        (
+            vec![
+                "synth".into(),
+                "--out".into(),
+                out.clone().into(),
+                "--distance".into(),
+                "3".into(),
+            ],
+            "add --camera perspective",
+        ),
+    ];
+    for (args, says) in cases {
+        let (code, _, err) = outputs(bin().args(&args));
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    assert!(!out.exists(), "a refused command wrote {}", out.display());
+}

@@ -154,6 +154,7 @@ def track(
     window: Optional[int] = None,
     levels: Optional[int] = None,
     fb_threshold: Optional[float] = None,
+    subpixel: Union[bool, dict, None] = True,
     detect: Optional[dict] = None,
     klt: Optional[dict] = None,
     progress: Optional[Callable[[dict], Any]] = None,
@@ -165,8 +166,12 @@ def track(
 
     Shortcuts: ``max_features`` (detect.max_features, default 500), ``window``
     (klt.window, 21), ``levels`` (klt.max_level, 3), ``fb_threshold`` (klt.fb_threshold,
-    1.0 px). ``detect`` and ``klt`` override any field of those sections, other keywords the
-    top-level fields (``min_track_len``, ``redetect``, ``redetect_below``,
+    1.0 px). ``subpixel``: the sub-pixel (Forstner) refinement of detected corners before
+    they are tracked (``True``, the default); ``False`` (or ``None``) starts new tracks at
+    the whole-pixel corners, as the CLI's ``--no-subpixel``; a dict overrides fields of the
+    refinement (``method``, ``half_window``, ``max_iterations``, ``epsilon``,
+    ``max_shift``). ``detect`` and ``klt`` override any field of those sections, other
+    keywords the top-level fields (``min_track_len``, ``redetect``, ``redetect_below``,
     ``redetect_radius``, ``redetect_with_points``); ``default_settings("track")`` lists every
     field and its default. ``progress(event)`` is called once per frame with a dict."""
     over: dict = dict(settings)
@@ -180,6 +185,12 @@ def track(
         k["max_level"] = levels
     if fb_threshold is not None:
         k["fb_threshold"] = fb_threshold
+    if subpixel is False or subpixel is None:
+        over["subpixel"] = None
+    elif isinstance(subpixel, dict):
+        over["subpixel"] = dict(subpixel)
+    elif subpixel is not True:
+        raise ConfigError(f"subpixel must be True, False or a dict, got {subpixel!r}")
     if d:
         over["detect"] = d
     if k:

@@ -100,6 +100,7 @@ def track(
     window: Optional[int] = ...,
     levels: Optional[int] = ...,
     fb_threshold: Optional[float] = ...,
+    subpixel: Union[bool, dict, None] = ...,
     detect: Optional[dict] = ...,
     klt: Optional[dict] = ...,
     progress: Optional[Progress] = ...,

@@ -262,6 +262,28 @@ def test_tracking_numpy_frames_and_folders(tmp_path):
         rank3.track(tmp_path / "nothing-here")
 
 
+def test_tracking_subpixel_option():
+    rng = np.random.default_rng(1)
+    tex = np.kron(rng.random((40, 40)), np.ones((6, 6)))  # corners between pixels
+    frames = [np.roll(tex, k, axis=1)[20:200, 20:220] for k in range(3)]
+    on = rank3.track(frames, max_features=100)
+    off = rank3.track(frames, max_features=100, subpixel=False)
+    first_on = on.xy[0][on.observed[0]]
+    first_off = off.xy[0][off.observed[0]]
+    assert len(first_on) > 20 and len(first_off) > 20
+    # Without the refinement new tracks start at whole pixels; with it (the default) most
+    # corners move off them.
+    np.testing.assert_array_equal(first_off, np.round(first_off))
+    assert np.mean(first_on != np.round(first_on)) > 0.5
+    # None is False; a dict overrides the refinement's fields (and is checked).
+    none = rank3.track(frames, max_features=100, subpixel=None)
+    np.testing.assert_array_equal(none.xy, off.xy)
+    with pytest.raises(rank3.ConfigError):
+        rank3.track(frames, subpixel={"half_window": 0})
+    with pytest.raises(rank3.ConfigError):
+        rank3.track(frames, subpixel="off")
+
+
 def test_pycolmap_interop(tmp_path):
     pycolmap = pytest.importorskip("pycolmap")
     xy = scene(frames=10, points=60, distance=3.0, seed=5)
