@@ -1018,7 +1018,7 @@ impl Reconstruction {
         let mut selection = robust_stage(&kept, config, &mut timer, &mut warnings)?;
         // 3. Fit of the selected tracks: affine factorization, metric upgrade, refinement,
         //    and the projective stages for the projective and perspective cameras.
-        let mut fitted = fit_selection(&kept, &selection, config, &mut timer)?;
+        let mut fitted = fit_selection(&kept, &selection, config, None, &mut timer)?;
         // 4. The projective model judges the tracks again.
         if config.camera.is_projective() {
             fitted = projective_verdict_stage(
@@ -1297,7 +1297,11 @@ fn projective_verdict_stage(
         }
         sel.inlier = v.0;
         sel.flagged = v.1;
-        fitted = fit_selection(kept, sel, config, timer)?;
+        let previous = fitted
+            .projective
+            .as_ref()
+            .map(|pf| (pf, &fitted.used_frames[..]));
+        fitted = fit_selection(kept, sel, config, previous, timer)?;
         refits += 1;
     }
     let inlier = &sel.inlier;
@@ -1697,12 +1701,15 @@ struct Fitted {
 
 /// Fits the inlier tracks of `kept` with the flagged entries hidden: affine factorization
 /// (SVD or completion), metric upgrade, refinement, and with the projective camera the
-/// projective stages ([`crate::projective`]).
-#[allow(clippy::too_many_arguments)]
+/// projective stages ([`crate::projective`]). A refit after the projective verdict passes
+/// the previous projective fit: when the frames are the same, its cameras (with the
+/// selection's points triangulated) start the projective bundle adjustment
+/// ([`projective::refine`]), instead of the affine start and the pOSE bridge.
 fn fit_selection(
     kept: &Kept<'_>,
     selection: &Selection,
     config: &Config,
+    previous: Option<(&projective::ProjectiveFit, &[usize])>,
     timer: &mut Timer<'_>,
 ) -> Result<Fitted> {
     let (kept_frames, kept_tracks) = (&kept.frames, &kept.tracks);
@@ -1917,8 +1924,21 @@ fn fit_selection(
                 .max_iterations
                 .min(config.perspective.projective_iterations.max(1));
         }
-        let pf = timer.run("projective", |obs| {
-            projective::fit(&meas, start, &pcfg, 0, obs)
+        // The previous fit's cameras, when they are this fit's frames.
+        let warm = previous
+            .filter(|(_, frames)| *frames == &used_frames[..])
+            .map(|(pf, _)| {
+                let mut model = ProjectiveModel {
+                    cameras: pf.model.cameras.clone(),
+                    points: Vec::new(),
+                };
+                model.points = model.triangulate(&meas);
+                model
+            })
+            .filter(|m| m.points.iter().flatten().all(|v| v.is_finite()));
+        let pf = timer.run("projective", |obs| match &warm {
+            Some(model) => projective::refine(&meas, model, &pcfg, 0, obs),
+            None => projective::fit(&meas, start, &pcfg, 0, obs),
         })?;
         for st in &pf.stages {
             if st.status != SolverStatus::Converged
