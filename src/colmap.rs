@@ -66,6 +66,12 @@
 //! point id, one frame per image, ordered by name — so that `rank3 reconstruct DIR` takes a
 //! COLMAP model's matches as its input.
 //!
+//! # A model as a reference
+//!
+//! [`read_reference`] reads a model to score a reconstruction against (`rank3 eval`,
+//! [`crate::compare`]): as [`ColmapModel::read_text`], but its cameras may be of any of
+//! COLMAP's camera models ([`ReferenceCamera`]), as in models COLMAP itself makes.
+//!
 //! # Cost
 //!
 //! Writing, reading and validating are linear in the number of cameras, images, keypoints
@@ -340,16 +346,22 @@ impl ColmapModel {
             images: read_images(&images_path, &mut lines.images, &mut lines.points2d)?,
             points: read_points(&points_path, &mut lines.points)?,
         };
-        model.check().map_err(|p| {
-            let (path, line) = match p.loc {
-                Loc::Camera(i) => (&cameras_path, lines.cameras[i]),
-                Loc::Image(i) => (&images_path, lines.images[i]),
-                Loc::Points2d(i) => (&images_path, lines.points2d[i]),
-                Loc::Point(i) => (&points_path, lines.points[i]),
-            };
-            Error::parse(path, line, p.field, p.message)
-        })?;
+        model.check_read(dir, &lines)?;
         Ok(model)
+    }
+
+    /// [`Self::check`] on a model read from the files in `dir`, the fault located by file
+    /// and line.
+    fn check_read(&self, dir: &Path, lines: &Lines) -> Result<()> {
+        self.check().map_err(|p| {
+            let (name, line) = match p.loc {
+                Loc::Camera(i) => (CAMERAS_TXT, lines.cameras[i]),
+                Loc::Image(i) => (IMAGES_TXT, lines.images[i]),
+                Loc::Points2d(i) => (IMAGES_TXT, lines.points2d[i]),
+                Loc::Point(i) => (POINTS3D_TXT, lines.points[i]),
+            };
+            Error::parse(dir.join(name), line, p.field, p.message)
+        })
     }
 
     /// Checks the model is one COLMAP can use as it is:
@@ -1167,6 +1179,164 @@ pub fn read_tracks(dir: &Path) -> Result<(crate::TrackTable, Vec<String>)> {
     Ok((table, warnings))
 }
 
+/// One camera of a COLMAP model read as a reference ([`read_reference`]): any of COLMAP's
+/// camera models, its parameters in COLMAP's order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReferenceCamera {
+    pub id: u32,
+    /// COLMAP's model name as written (`OPENCV`, `SIMPLE_RADIAL_FISHEYE`, ...).
+    pub model: String,
+    pub width: u32,
+    pub height: u32,
+    pub params: Vec<f64>,
+}
+
+/// COLMAP's perspective (pinhole-based) camera models whose focal length `rank3 eval`
+/// compares, with their parameter counts: the focal length is `PARAMS[0]` for the
+/// single-focal models, `(fx + fy) / 2` (`PARAMS[0]`, `PARAMS[1]`) for the others. The
+/// fisheye models' focal lengths belong to another projection and are not compared.
+const FOCAL_MODELS: [(&str, usize, bool); 6] = [
+    ("SIMPLE_PINHOLE", 3, false),
+    ("PINHOLE", 4, true),
+    ("SIMPLE_RADIAL", 4, false),
+    ("RADIAL", 5, false),
+    ("OPENCV", 8, true),
+    ("FULL_OPENCV", 12, true),
+];
+
+impl ReferenceCamera {
+    /// The focal length in pixels for the models of [`FOCAL_MODELS`] (`(fx + fy) / 2` when
+    /// there are two, COLMAP's mean focal length); `None` for any other model.
+    pub fn focal_px(&self) -> Option<f64> {
+        let &(_, _, two) = FOCAL_MODELS.iter().find(|(m, _, _)| *m == self.model)?;
+        if two {
+            Some(0.5 * (self.params[0] + self.params[1]))
+        } else {
+            Some(self.params[0])
+        }
+    }
+}
+
+/// A COLMAP text model read as a reference for `rank3 eval` ([`read_reference`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ColmapReference {
+    /// The folder holding the three files.
+    pub dir: PathBuf,
+    pub cameras: Vec<ReferenceCamera>,
+    pub images: Vec<ColmapImage>,
+    pub points: Vec<ColmapPoint>,
+}
+
+/// Reads the COLMAP text model in `dir` (`cameras.txt`, `images.txt`, `points3D.txt`) as
+/// [`ColmapModel::read_text`] does, except that the cameras may be of any of COLMAP's camera
+/// models (a model made by COLMAP has `OPENCV`, `RADIAL`, fisheye cameras, ...): the model
+/// name is kept as written and its parameters as numbers; the count is checked for the
+/// models of [`ReferenceCamera::focal_px`]. Images and 3D points are read and checked as by
+/// [`ColmapModel::read_text`] (ids, references, tracks that agree with the keypoints).
+/// `rigs.txt` and `frames.txt` (COLMAP ≥ 3.12) are not read.
+///
+/// Errors: [`Error::Io`] for a missing or unreadable file (with a hint when the folder
+/// holds a binary model instead); [`Error::Parse`] naming the file, the 1-based line and
+/// the field for anything malformed.
+pub fn read_reference(dir: &Path) -> Result<ColmapReference> {
+    let images_path = dir.join(IMAGES_TXT);
+    if !images_path.is_file() && dir.join("images.bin").is_file() {
+        return Err(Error::io(
+            &images_path,
+            std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                "the folder holds a binary COLMAP model (images.bin): convert it to text with \
+                 `colmap model_converter --input_path DIR --output_path DIR --output_type TXT`",
+            ),
+        ));
+    }
+    let mut lines = Lines::default();
+    let cameras = read_any_cameras(&dir.join(CAMERAS_TXT), &mut lines.cameras)?;
+    let images = read_images(&images_path, &mut lines.images, &mut lines.points2d)?;
+    let points = read_points(&dir.join(POINTS3D_TXT), &mut lines.points)?;
+    // The checks of `read_text`, the cameras standing in as pinholes (their own numbers
+    // were checked when read).
+    let model = ColmapModel {
+        cameras: cameras
+            .iter()
+            .map(|c| ColmapCamera {
+                id: c.id,
+                model: ColmapCameraModel::SimplePinhole {
+                    f: 1.0,
+                    cx: 0.0,
+                    cy: 0.0,
+                },
+                width: c.width,
+                height: c.height,
+            })
+            .collect(),
+        images,
+        points,
+    };
+    model.check_read(dir, &lines)?;
+    Ok(ColmapReference {
+        dir: dir.to_path_buf(),
+        cameras,
+        images: model.images,
+        points: model.points,
+    })
+}
+
+/// `cameras.txt` with any camera model (see [`read_reference`]).
+fn read_any_cameras(path: &Path, lines: &mut Vec<usize>) -> Result<Vec<ReferenceCamera>> {
+    const NAMES: [&str; 4] = ["CAMERA_ID", "MODEL", "WIDTH", "HEIGHT"];
+    let mut reader = LineReader::open(path)?;
+    let mut cameras = Vec::new();
+    while let Some((n, text)) = reader.next_data()? {
+        let t = fields(path, n, &text, &NAMES)?;
+        let id = parse_field(path, n, "CAMERA_ID", t[0], "a camera id (0 to 4294967295)")?;
+        let model = t[1].to_string();
+        if !model
+            .chars()
+            .all(|c| c.is_ascii_uppercase() || c.is_ascii_digit() || c == '_')
+        {
+            return Err(Error::parse(
+                path,
+                n,
+                "MODEL",
+                format!("`{model}` is not a COLMAP camera model name (e.g. SIMPLE_RADIAL)"),
+            ));
+        }
+        let width = parse_field(path, n, "WIDTH", t[2], "a width in pixels")?;
+        let height = parse_field(path, n, "HEIGHT", t[3], "a height in pixels")?;
+        let mut params = Vec::with_capacity(t.len() - 4);
+        for (k, s) in t[4..].iter().enumerate() {
+            let field = format!("PARAMS[{k}]");
+            let v: f64 = parse_field(path, n, &field, s, NUMBER)?;
+            if !v.is_finite() {
+                return Err(Error::parse(path, n, field, format!("{v} is not finite")));
+            }
+            params.push(v);
+        }
+        let count = FOCAL_MODELS
+            .iter()
+            .find(|(m, _, _)| *m == model)
+            .map(|&(_, count, _)| count);
+        if let Some(count) = count.filter(|&c| c != params.len()) {
+            return Err(Error::parse(
+                path,
+                n,
+                "PARAMS",
+                format!("{model} takes {count} parameters, found {}", params.len()),
+            ));
+        }
+        cameras.push(ReferenceCamera {
+            id,
+            model,
+            width,
+            height,
+            params,
+        });
+        lines.push(n);
+    }
+    Ok(cameras)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1725,6 +1895,56 @@ mod tests {
         let err = model().write_text(&dir).unwrap_err();
         assert!(matches!(err, Error::InvalidConfig { .. }), "{err}");
         assert!(!dir.join(CAMERAS_TXT).exists());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_reference_model_may_have_any_camera_model() {
+        let dir = tmp("reference");
+        let m = model();
+        m.write_text(&dir).unwrap();
+        let r = read_reference(&dir).unwrap();
+        let strict = ColmapModel::read_text(&dir).unwrap();
+        assert_eq!((&r.images, &r.points), (&strict.images, &strict.points));
+        let focal: Vec<Option<f64>> = r.cameras.iter().map(|c| c.focal_px()).collect();
+        assert_eq!(focal, [Some(500.25), Some(812.123456789012), Some(1000.0)]);
+        // Lines 4-6 are the cameras.
+        let cams = dir.join(CAMERAS_TXT);
+        let write = |line: &str| {
+            let text = std::fs::read_to_string(&cams).unwrap();
+            let mut lines: Vec<&str> = text.lines().collect();
+            lines[4] = line;
+            std::fs::write(&cams, lines.join("\n") + "\n").unwrap();
+        };
+        write("7 OPENCV 800 600 810 790 400 300 0.1 0.2 0 0");
+        assert_eq!(
+            read_reference(&dir).unwrap().cameras[1].focal_px(),
+            Some(800.0)
+        );
+        write("7 THIN_PRISM_FISHEYE 800 600 1 2 3 4 5 6 7 8 9 10 11 12");
+        let r = read_reference(&dir).unwrap();
+        assert_eq!(
+            (r.cameras[1].model.as_str(), r.cameras[1].focal_px()),
+            ("THIN_PRISM_FISHEYE", None)
+        );
+        for (line, field) in [
+            ("7 OPENCV 800 600 810 790 400 300", "PARAMS"),
+            ("7 RADIAL 800 600 1 2 x 4 5", "PARAMS[2]"),
+            ("7 RADIAL 800 600 1 2 3 4 inf", "PARAMS[4]"),
+            ("7 radial? 800 600 1", "MODEL"),
+        ] {
+            write(line);
+            match read_reference(&dir) {
+                Err(Error::Parse { line, field: f, .. }) => {
+                    assert_eq!((line, f.as_str()), (5, field))
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        // The other files are checked as by `read_text`.
+        write("7 SIMPLE_RADIAL 800 600 1 2 3 4");
+        std::fs::write(dir.join(POINTS3D_TXT), "10 0 0 0 1 2 3 0 1 0\n").unwrap();
+        assert!(matches!(read_reference(&dir), Err(Error::Parse { .. })));
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -2,8 +2,10 @@
 //!
 //! The estimate is a `reconstruction.json` (or the output folder holding it); the reference
 //! is the `truth.json` of `rank3 synth` or another `reconstruction.json` (or the folder
-//! holding either). Points are matched by track id, cameras by frame id. The figures, all
-//! computed by [`crate::eval`]:
+//! holding either), whose points are matched by track id and cameras by frame id — or a
+//! COLMAP text model, whose images are matched to frames by name and whose 3D points are
+//! matched to tracks by shared observations ([`evaluate_with`] gives the rules). The
+//! figures, all computed by [`crate::eval`]:
 //!
 //! * **structure error** — the estimate's points are aligned to the reference's by the
 //!   least-squares similarity ([`crate::eval::align_similarity`]); the RMS distance that
@@ -20,7 +22,8 @@
 //!   of the RMS distance of the reference's centres from its points' centroid (the
 //!   viewing distance).
 //! * **focal length error** — when both have one: `(f_est − f_ref) / f_ref`, %.
-//! * the reprojection RMS each file stores (`rms_px`; a truth has none).
+//! * the reprojection RMS each file stores (`rms_px`; a truth and a COLMAP model have
+//!   none).
 //!
 //! Points that a side marks as outliers (`inlier: false` in a reconstruction; `outlier`,
 //! or `object ≠ 0`, in a truth) or whose coordinates are not finite are not compared.
@@ -97,6 +100,69 @@ pub enum EvalError {
         have: usize,
         needed: usize,
     },
+    /// A COLMAP reference model, or the track table given as the estimate's observations,
+    /// could not be read ([`crate::Error::Parse`] names the file, line and field;
+    /// [`crate::Error::Io`] the file).
+    #[error(transparent)]
+    Input(#[from] crate::Error),
+    /// A COLMAP model was given where its points cannot be matched: [`load_reference`]
+    /// reads JSON references only (use [`evaluate`]).
+    #[error(
+        "{} is a COLMAP model: its 3D points are matched to a reconstruction's tracks by \
+         their observations, so it is read by rank3::compare::evaluate, not load_reference",
+        path.display()
+    )]
+    ColmapNeedsEstimate { path: PathBuf },
+    /// No image name of the COLMAP reference matches a frame id of the estimate.
+    #[error(
+        "{} and {} share no frame: no image name matches a frame id (reference images {}; \
+         estimate frames {}). An image matches a frame when its name is the frame id, or \
+         when its name without folder and extension is (`000042.png` is frame 42)",
+        estimate.display(),
+        reference.display(),
+        reference_examples,
+        estimate_examples
+    )]
+    NoCommonFrames {
+        estimate: PathBuf,
+        reference: PathBuf,
+        /// A few names and ids of each side, with their counts.
+        reference_examples: String,
+        estimate_examples: String,
+    },
+    /// The estimate's 2D observations, needed to match its tracks to a COLMAP reference's
+    /// 3D points, are not available.
+    #[error(
+        "{}: its tracks cannot be matched to the COLMAP model {}: {reason}",
+        estimate.display(),
+        reference.display()
+    )]
+    NoObservations {
+        estimate: PathBuf,
+        reference: PathBuf,
+        reason: String,
+    },
+    /// No track of the estimate shares observations with a 3D point of the COLMAP
+    /// reference.
+    #[error(
+        "{} vs {}: no track matches a 3D point of the reference ({tracks} tracks observed \
+         in the {frames} matched images; a track matches the 3D point that a majority of its \
+         observations, at least 2, lie within {tolerance_px} px of keypoints of). Are the \
+         observations from the same images and in the same pixel convention (COLMAP's: the \
+         centre of the top-left pixel at (0.5, 0.5))?",
+        estimate.display(),
+        reference.display()
+    )]
+    NoMatchedPoints {
+        estimate: PathBuf,
+        reference: PathBuf,
+        tracks: usize,
+        frames: usize,
+        tolerance_px: f64,
+    },
+    /// [`EvalOptions::match_tolerance_px`] is not a positive number.
+    #[error("the matching tolerance must be a positive number of pixels, not {0}")]
+    InvalidTolerance(f64),
     /// The common points do not determine an alignment (all coincide).
     #[error(
         "{} vs {}: the common points do not determine an alignment ({message})",
@@ -118,6 +184,8 @@ pub enum SceneKind {
     Truth,
     /// A `reconstruction.json`.
     Reconstruction,
+    /// A COLMAP text model (`cameras.txt`, `images.txt`, `points3D.txt`).
+    Colmap,
 }
 
 /// One camera of a [`Scene`].
@@ -139,7 +207,8 @@ pub struct Scene {
     pub camera_model: CameraModel,
     /// A Euclidean perspective model (no depth-reversal ambiguity).
     pub euclidean: bool,
-    /// Which points: `"perspective.points"`, `"points"` or `"truth points"`.
+    /// Which points: `"perspective.points"`, `"points"`, `"truth points"` or
+    /// `"points3D.txt"`.
     pub structure: &'static str,
     /// Every listed point by track id; `None` when it is not compared (outlier, other
     /// object, not finite).
@@ -331,36 +400,97 @@ fn probe(text: &str) -> Probe {
     serde_json::from_str(text).unwrap_or_default()
 }
 
-/// The reference: a `truth.json` (`rank3 synth`), a `reconstruction.json`, or a folder
-/// holding either (`truth.json` first). A JSON file is a reconstruction when it has a
-/// `schema` key, a truth when it has a `config` key, else read as a reconstruction
-/// written before the schema key existed.
-///
-/// Errors: [`EvalError::NothingToRead`], [`EvalError::Read`], [`EvalError::Truth`].
-pub fn load_reference(path: &Path) -> Result<Scene, EvalError> {
-    let file = if path.is_dir() {
-        match ["truth.json", "reconstruction.json"]
+/// What a reference path names.
+enum ReferencePath {
+    /// A `truth.json` or `reconstruction.json`.
+    Json(PathBuf),
+    /// The folder of a COLMAP text model.
+    Colmap(PathBuf),
+}
+
+/// The first line of COLMAP's text files (COLMAP's writer and rank3's).
+const COLMAP_HEADERS: [&str; 3] = ["# Camera list", "# Image list", "# 3D point list"];
+
+/// Whether the file at `path` starts like one of COLMAP's text files.
+fn starts_like_colmap(path: &Path) -> bool {
+    use std::io::{BufRead, Read};
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut line = String::new();
+    let mut reader = std::io::BufReader::new(file).take(256);
+    if reader.read_line(&mut line).is_err() {
+        return false;
+    }
+    COLMAP_HEADERS.iter().any(|h| line.starts_with(h))
+}
+
+/// Resolves a reference path: a folder holding `truth.json` or `reconstruction.json` (in
+/// that order) or a COLMAP text model (`cameras.txt`, `images.txt`, `points3D.txt`, or a
+/// binary model, refused with a hint when read); a file named like one of COLMAP's three, or
+/// starting with COLMAP's header comment, is its folder's model; any other file is JSON.
+fn resolve_reference(path: &Path) -> Result<ReferencePath, EvalError> {
+    use crate::colmap::{CAMERAS_TXT, IMAGES_TXT, POINTS3D_TXT};
+    if path.is_dir() {
+        if let Some(f) = ["truth.json", "reconstruction.json"]
             .iter()
             .map(|n| path.join(n))
             .find(|f| f.is_file())
         {
-            Some(f) => f,
-            None => {
-                return Err(EvalError::NothingToRead {
-                    path: path.to_path_buf(),
-                    expected: "truth.json or reconstruction.json",
-                });
-            }
+            return Ok(ReferencePath::Json(f));
         }
-    } else {
-        path.to_path_buf()
-    };
-    let text = read_text(&file)?;
+        if [IMAGES_TXT, CAMERAS_TXT, POINTS3D_TXT, "images.bin"]
+            .iter()
+            .any(|n| path.join(n).is_file())
+        {
+            return Ok(ReferencePath::Colmap(path.to_path_buf()));
+        }
+        return Err(EvalError::NothingToRead {
+            path: path.to_path_buf(),
+            expected: "truth.json, reconstruction.json or a COLMAP text model (cameras.txt, \
+                       images.txt, points3D.txt)",
+        });
+    }
+    let named = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .is_some_and(|n| [CAMERAS_TXT, IMAGES_TXT, POINTS3D_TXT].contains(&n));
+    if named || (path.is_file() && starts_like_colmap(path)) {
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        return Ok(ReferencePath::Colmap(dir));
+    }
+    Ok(ReferencePath::Json(path.to_path_buf()))
+}
+
+/// A JSON reference: a `truth.json` (`rank3 synth`), a `reconstruction.json`, or a folder
+/// holding either (`truth.json` first). A JSON file is a reconstruction when it has a
+/// `schema` key, a truth when it has a `config` key, else read as a reconstruction
+/// written before the schema key existed.
+///
+/// A COLMAP model (see [`evaluate`]) is matched to an estimate's tracks, so it is not a
+/// [`Scene`] on its own: this returns [`EvalError::ColmapNeedsEstimate`] for one.
+///
+/// Errors: [`EvalError::NothingToRead`], [`EvalError::Read`], [`EvalError::Truth`],
+/// [`EvalError::ColmapNeedsEstimate`].
+pub fn load_reference(path: &Path) -> Result<Scene, EvalError> {
+    match resolve_reference(path)? {
+        ReferencePath::Json(file) => load_json_reference(&file),
+        ReferencePath::Colmap(_) => Err(EvalError::ColmapNeedsEstimate {
+            path: path.to_path_buf(),
+        }),
+    }
+}
+
+fn load_json_reference(file: &Path) -> Result<Scene, EvalError> {
+    let text = read_text(file)?;
     if probe(&text).is_truth() {
-        truth_scene(&text, &file)
+        truth_scene(&text, file)
     } else {
-        let rec = reconstruction_file::from_json_str(&text, &file)?;
-        Ok(Scene::from_reconstruction(&rec, &file))
+        let rec = reconstruction_file::from_json_str(&text, file)?;
+        Ok(Scene::from_reconstruction(&rec, file))
     }
 }
 
@@ -449,9 +579,13 @@ pub struct Comparison {
     pub centre_pct: Option<Summary>,
     /// `None` unless both sides have a focal length.
     pub focal: Option<FocalError>,
-    /// The reprojection RMS each file stores, pixels (`None` for a truth).
+    /// The reprojection RMS each file stores, pixels (`None` for a truth and a COLMAP
+    /// model).
     pub estimate_rms_px: Option<f64>,
     pub reference_rms_px: Option<f64>,
+    /// With a COLMAP reference: how its images and 3D points were matched to the
+    /// estimate's frames and tracks.
+    pub matching: Option<ColmapMatching>,
 }
 
 /// Scores `est` against `reference` (see the module documentation).
@@ -598,14 +732,546 @@ pub fn compare(est: &Scene, reference: &Scene) -> Result<Comparison, EvalError> 
         focal,
         estimate_rms_px: est.rms_px,
         reference_rms_px: reference.rms_px,
+        matching: None,
     })
 }
 
-/// [`load_estimate`], [`load_reference`], then [`compare`].
+/// [`evaluate_with`] with the default [`EvalOptions`].
 pub fn evaluate(estimate: &Path, reference: &Path) -> Result<Comparison, EvalError> {
+    evaluate_with(estimate, reference, &EvalOptions::default())
+}
+
+/// Default of [`EvalOptions::match_tolerance_px`], pixels.
+pub const MATCH_TOLERANCE_PX: f64 = 2.0;
+
+/// How [`evaluate_with`] matches a COLMAP reference.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EvalOptions {
+    /// The track table the estimate was reconstructed from (any format `rank3 reconstruct`
+    /// reads, a COLMAP model folder included), as the estimate's 2D observations. Without
+    /// it they are read from the estimate's own COLMAP export (`colmap/` next to its
+    /// `reconstruction.json`), which only a perspective result has. Used only with a COLMAP
+    /// reference.
+    pub tracks: Option<PathBuf>,
+    /// How far, in pixels, an observation may lie from a reference keypoint to vote for
+    /// its 3D point ([`MATCH_TOLERANCE_PX`]).
+    pub match_tolerance_px: f64,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        EvalOptions {
+            tracks: None,
+            match_tolerance_px: MATCH_TOLERANCE_PX,
+        }
+    }
+}
+
+/// How a COLMAP reference was matched to the estimate (`matching` in `rank3 eval --json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ColmapMatching {
+    /// Where the estimate's 2D observations were read: its own COLMAP export
+    /// (`DIR/colmap`) or the track table given.
+    pub observations: PathBuf,
+    pub tolerance_px: f64,
+    /// Images of the reference; matched to an estimate frame by their exact name, by their
+    /// stem (name without folder and extension, a number without its leading zeros); not
+    /// matched.
+    pub images: usize,
+    pub images_by_name: usize,
+    pub images_by_stem: usize,
+    pub images_unmatched: usize,
+    /// Estimate tracks observed in the matched images; matched to a 3D point; left
+    /// unmatched (no point with a majority of at least 2 of their observations); ambiguous
+    /// (the point they chose was chosen by another track as often).
+    pub tracks: usize,
+    pub tracks_matched: usize,
+    pub tracks_unmatched: usize,
+    pub tracks_ambiguous: usize,
+    /// Up to 10 ids of the unmatched and ambiguous tracks.
+    pub unmatched_examples: Vec<Id>,
+    /// Of the matched tracks' observations in matched images, the fraction within the
+    /// tolerance of a keypoint of their 3D point.
+    pub agreement: f64,
+    /// The reference's camera models (distinct, in file order).
+    pub camera_models: Vec<String>,
+    /// Why the focal length is not compared, or how the reference's was formed; `None`
+    /// when one focal length was compared as it is.
+    pub intrinsics_note: Option<String>,
+}
+
+/// The estimate's 2D observations in COLMAP's pixel convention, by frame id: `(index into
+/// the estimate's points, [x, y])`.
+struct Observations {
+    source: PathBuf,
+    by_frame: HashMap<Id, Vec<(usize, [f64; 2])>>,
+}
+
+/// The file stem of an image name: without its folders and its last extension.
+fn image_stem(name: &str) -> &str {
+    let file = name.rsplit(['/', '\\']).next().unwrap_or(name);
+    match file.rfind('.') {
+        Some(k) if k > 0 => &file[..k],
+        _ => file,
+    }
+}
+
+/// The text rank3's COLMAP export names frame `id`'s image (white space as `_`).
+fn export_name(id: &Id) -> String {
+    id.to_string()
+        .chars()
+        .map(|c| if c.is_whitespace() { '_' } else { c })
+        .collect()
+}
+
+/// Frame `id` is the frame an image of stem `stem` shows: the stem is the id's text, or a
+/// number equal to an integer id (`000042` is 42).
+fn stem_matches(stem: &str, id: &Id) -> bool {
+    stem == export_name(id) || matches!((Id::parse(stem), id), (Id::Int(a), Id::Int(b)) if a == *b)
+}
+
+/// Which frame (index into `ids`) each image (by `names`) shows, and whether by its exact
+/// name (`true`) or its stem. First every image whose name is a frame id's text; then,
+/// among the images and frames left, the pairs whose stem matches ([`stem_matches`]) one to
+/// one: an image whose stem matches two frames, or a frame two images match, is left out.
+fn match_frames(names: &[&str], ids: &[Id]) -> Vec<Option<(usize, bool)>> {
+    let mut by_text: HashMap<String, Vec<usize>> = HashMap::new();
+    for (f, id) in ids.iter().enumerate() {
+        by_text.entry(export_name(id)).or_default().push(f);
+    }
+    let mut taken = vec![false; ids.len()];
+    let mut out: Vec<Option<(usize, bool)>> = names
+        .iter()
+        .map(|n| match by_text.get(*n).map(Vec::as_slice) {
+            Some(&[f]) => {
+                taken[f] = true;
+                Some((f, true))
+            }
+            _ => None,
+        })
+        .collect();
+    // Integer ids by value, the others by text, for the stems.
+    let mut by_int: HashMap<i64, Vec<usize>> = HashMap::new();
+    for (f, id) in ids.iter().enumerate().filter(|(f, _)| !taken[*f]) {
+        if let Id::Int(v) = id {
+            by_int.entry(*v).or_default().push(f);
+        }
+    }
+    let mut claims: Vec<Vec<usize>> = vec![Vec::new(); ids.len()];
+    let mut wants: Vec<Vec<usize>> = vec![Vec::new(); names.len()];
+    for (i, name) in names.iter().enumerate().filter(|(i, _)| out[*i].is_none()) {
+        let stem = image_stem(name);
+        let mut fs: Vec<usize> = by_text.get(stem).cloned().unwrap_or_default();
+        if let Id::Int(v) = Id::parse(stem) {
+            fs.extend(by_int.get(&v).into_iter().flatten());
+        }
+        fs.retain(|&f| !taken[f] && stem_matches(stem, &ids[f]));
+        fs.sort_unstable();
+        fs.dedup();
+        for &f in &fs {
+            claims[f].push(i);
+        }
+        wants[i] = fs;
+    }
+    for (i, fs) in wants.iter().enumerate() {
+        if let &[f] = fs.as_slice()
+            && claims[f].len() == 1
+        {
+            out[i] = Some((f, false));
+        }
+    }
+    out
+}
+
+/// Bit patterns of a point, to find a point written by two exact (shortest round-trip)
+/// writers.
+fn xyz_key(v: &Vector3<f64>) -> [u64; 3] {
+    [v.x.to_bits(), v.y.to_bits(), v.z.to_bits()]
+}
+
+/// The estimate's observations: from the track table given, else from its own COLMAP
+/// export (`colmap/` next to its `reconstruction.json`), whose 3D points are its tracks'
+/// points to the last bit (both files write numbers in their shortest exact form).
+fn estimate_observations(
+    est: &Scene,
+    reference: &Path,
+    opts: &EvalOptions,
+) -> Result<Observations, EvalError> {
+    let track_index: HashMap<&Id, usize> = est
+        .points
+        .iter()
+        .enumerate()
+        .map(|(k, (id, _))| (id, k))
+        .collect();
+    let mut by_frame: HashMap<Id, Vec<(usize, [f64; 2])>> = HashMap::new();
+    let off = crate::colmap::PIXEL_CENTRE_OFFSET;
+    if let Some(path) = &opts.tracks {
+        let table = crate::table::read_tracks(path)?.table;
+        for f in 0..table.n_frames() {
+            let list = by_frame.entry(table.frame_ids()[f].clone()).or_default();
+            for e in table.frame_row(f).entries() {
+                if let Some(&k) = track_index.get(&table.track_ids()[e.track as usize]) {
+                    list.push((k, [e.x + off, e.y + off]));
+                }
+            }
+        }
+        return Ok(Observations {
+            source: path.clone(),
+            by_frame,
+        });
+    }
+    let folder = match est.path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let dir = folder.join("colmap");
+    let no_obs = |reason: String| EvalError::NoObservations {
+        estimate: est.path.clone(),
+        reference: reference.to_path_buf(),
+        reason,
+    };
+    if !dir.join(crate::colmap::IMAGES_TXT).is_file() {
+        return Err(no_obs(format!(
+            "reconstruction.json holds no 2D observations, and {} has no COLMAP export \
+             (colmap/images.txt, written with a perspective result) to read them from; give \
+             the track table the reconstruction was made from (rank3 eval --tracks FILE)",
+            folder.display()
+        )));
+    }
+    let export = crate::colmap::read_reference(&dir)?;
+    let by_xyz: HashMap<[u64; 3], usize> = est
+        .points
+        .iter()
+        .enumerate()
+        .filter_map(|(k, (_, p))| p.map(|p| (xyz_key(&p), k)))
+        .collect();
+    let point_of: HashMap<u64, usize> = export
+        .points
+        .iter()
+        .filter_map(|p| {
+            let key = xyz_key(&Vector3::from(p.xyz));
+            by_xyz.get(&key).map(|&k| (p.id, k))
+        })
+        .collect();
+    if point_of.is_empty() && !export.points.is_empty() {
+        return Err(no_obs(format!(
+            "none of the {} 3D points of its COLMAP export {} is a point of the \
+             reconstruction (written by another run?); give the track table the \
+             reconstruction was made from (rank3 eval --tracks FILE)",
+            export.points.len(),
+            dir.display()
+        )));
+    }
+    let ids: Vec<Id> = est.frames.iter().map(|f| f.id.clone()).collect();
+    let names: Vec<&str> = export.images.iter().map(|im| im.name.as_str()).collect();
+    for (im, frame) in export.images.iter().zip(match_frames(&names, &ids)) {
+        let Some((f, _)) = frame else { continue };
+        let list = by_frame.entry(ids[f].clone()).or_default();
+        for &(xy, owner) in &im.points2d {
+            if let Some(&k) = owner.and_then(|pid| point_of.get(&pid)) {
+                list.push((k, xy));
+            }
+        }
+    }
+    Ok(Observations {
+        source: dir,
+        by_frame,
+    })
+}
+
+/// Keypoints of one image that have a 3D point, in a grid of `cell`-pixel cells.
+struct KeypointGrid<'a> {
+    cell: f64,
+    cells: HashMap<(i64, i64), Vec<usize>>,
+    keypoints: &'a [([f64; 2], Option<u64>)],
+}
+
+impl<'a> KeypointGrid<'a> {
+    fn new(keypoints: &'a [([f64; 2], Option<u64>)], cell: f64) -> Self {
+        let mut cells: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
+        for (k, (xy, owner)) in keypoints.iter().enumerate() {
+            if owner.is_some() {
+                cells.entry(Self::key(xy, cell)).or_default().push(k);
+            }
+        }
+        KeypointGrid {
+            cell,
+            cells,
+            keypoints,
+        }
+    }
+
+    fn key(xy: &[f64; 2], cell: f64) -> (i64, i64) {
+        ((xy[0] / cell).floor() as i64, (xy[1] / cell).floor() as i64)
+    }
+
+    /// The 3D point of the keypoint nearest to `xy`, if one lies within the cell size.
+    fn nearest(&self, xy: &[f64; 2]) -> Option<u64> {
+        if !(xy[0].is_finite() && xy[1].is_finite()) {
+            return None;
+        }
+        let (cx, cy) = Self::key(xy, self.cell);
+        let mut best: Option<(f64, u64)> = None;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for &k in self.cells.get(&(cx + dx, cy + dy)).into_iter().flatten() {
+                    let (p, owner) = &self.keypoints[k];
+                    let d = (p[0] - xy[0]).hypot(p[1] - xy[1]);
+                    if d <= self.cell && best.is_none_or(|(bd, _)| d < bd) {
+                        best = owner.map(|o| (d, o));
+                    }
+                }
+            }
+        }
+        best.map(|(_, o)| o)
+    }
+}
+
+/// A few items of a list, and its length, for error messages.
+fn examples<T: fmt::Display>(items: impl ExactSizeIterator<Item = T>) -> String {
+    let n = items.len();
+    let shown: Vec<String> = items.take(4).map(|x| format!("`{x}`")).collect();
+    let more = if n > shown.len() { ", …" } else { "" };
+    format!("{n}: {}{more}", shown.join(", "))
+}
+
+/// Scores `est` against the COLMAP model `model` (see [`evaluate_with`]).
+fn compare_colmap(
+    est: &Scene,
+    model: &crate::colmap::ColmapReference,
+    obs: &Observations,
+    tolerance_px: f64,
+) -> Result<Comparison, EvalError> {
+    let ids: Vec<Id> = est.frames.iter().map(|f| f.id.clone()).collect();
+    let names: Vec<&str> = model.images.iter().map(|im| im.name.as_str()).collect();
+    let frame_of = match_frames(&names, &ids);
+    let by_name = frame_of
+        .iter()
+        .flatten()
+        .filter(|(_, exact)| *exact)
+        .count();
+    let by_stem = frame_of.iter().flatten().count() - by_name;
+    if by_name + by_stem == 0 {
+        return Err(EvalError::NoCommonFrames {
+            estimate: est.path.clone(),
+            reference: model.dir.clone(),
+            reference_examples: examples(names.iter()),
+            estimate_examples: examples(ids.iter()),
+        });
+    }
+
+    // Votes: every observation of a track in a matched image for the 3D point of the
+    // nearest keypoint within the tolerance.
+    let point_index: HashMap<u64, usize> = model
+        .points
+        .iter()
+        .enumerate()
+        .map(|(k, p)| (p.id, k))
+        .collect();
+    let n = est.points.len();
+    let mut seen = vec![0u32; n];
+    let mut cast = vec![0u32; n];
+    let mut votes: HashMap<(usize, usize), u32> = HashMap::new();
+    for (im, frame) in model.images.iter().zip(&frame_of) {
+        let Some((f, _)) = frame else { continue };
+        let Some(list) = obs.by_frame.get(&ids[*f]) else {
+            continue;
+        };
+        let grid = KeypointGrid::new(&im.points2d, tolerance_px);
+        for (k, xy) in list {
+            seen[*k] += 1;
+            if let Some(&q) = grid.nearest(xy).and_then(|pid| point_index.get(&pid)) {
+                cast[*k] += 1;
+                *votes.entry((*k, q)).or_default() += 1;
+            }
+        }
+    }
+    // Each track's choice: the point holding a strict majority of its votes, at least 2.
+    let mut best: Vec<Option<(usize, u32)>> = vec![None; n];
+    for (&(k, q), &v) in &votes {
+        if best[k].is_none_or(|(_, b)| v > b) {
+            best[k] = Some((q, v));
+        }
+    }
+    let mut claims: HashMap<usize, Vec<(usize, u32)>> = HashMap::new();
+    for (k, b) in best.iter().enumerate() {
+        if let Some((q, v)) = *b
+            && v >= 2
+            && 2 * v > cast[k]
+        {
+            claims.entry(q).or_default().push((k, v));
+        }
+    }
+    // One track per point: the one with the most votes, none on a tie.
+    let mut matched: Vec<(usize, usize)> = Vec::new();
+    let mut ambiguous = vec![false; n];
+    for (&q, tracks) in &claims {
+        let top = tracks.iter().map(|t| t.1).max().unwrap_or(0);
+        let winners: Vec<usize> = tracks.iter().filter(|t| t.1 == top).map(|t| t.0).collect();
+        if winners.len() == 1 {
+            matched.push((winners[0], q));
+        }
+        for &(k, _) in tracks {
+            ambiguous[k] = winners.len() > 1 || k != winners[0];
+        }
+    }
+    matched.sort_unstable();
+    let tracks = seen.iter().filter(|&&s| s > 0).count();
+    if matched.is_empty() {
+        return Err(EvalError::NoMatchedPoints {
+            estimate: est.path.clone(),
+            reference: model.dir.clone(),
+            tracks,
+            frames: by_name + by_stem,
+            tolerance_px,
+        });
+    }
+    let is_matched: std::collections::HashSet<usize> = matched.iter().map(|m| m.0).collect();
+    let unmatched: Vec<usize> = (0..n)
+        .filter(|k| seen[*k] > 0 && !is_matched.contains(k))
+        .collect();
+    let (agree, total) = matched.iter().fold((0u64, 0u64), |(a, t), &(k, q)| {
+        (a + votes[&(k, q)] as u64, t + seen[k] as u64)
+    });
+
+    // The reference side, with the estimate's ids.
+    let cameras: HashMap<u32, &crate::colmap::ReferenceCamera> =
+        model.cameras.iter().map(|c| (c.id, c)).collect();
+    let mut frames = Vec::new();
+    let mut focals: Vec<(u32, Option<f64>)> = Vec::new();
+    for (im, frame) in model.images.iter().zip(&frame_of) {
+        let Some((f, _)) = frame else { continue };
+        frames.push(SceneFrame {
+            id: ids[*f].clone(),
+            rotation: im.rotation,
+            centre: Some(-im.rotation.transpose() * im.translation),
+        });
+        focals.push((
+            im.camera_id,
+            cameras.get(&im.camera_id).and_then(|c| c.focal_px()),
+        ));
+    }
+    let mut camera_models: Vec<String> = Vec::new();
+    for c in &model.cameras {
+        if !camera_models.contains(&c.model) {
+            camera_models.push(c.model.clone());
+        }
+    }
+    let (focal_px, intrinsics_note) = match focals.iter().find(|(_, f)| f.is_none()) {
+        Some((id, _)) => (
+            None,
+            Some(format!(
+                "camera {id} is a {} camera: intrinsics not compared (focal lengths are \
+                 compared for SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV and \
+                 FULL_OPENCV cameras)",
+                cameras.get(id).map_or("?", |c| c.model.as_str())
+            )),
+        ),
+        None => {
+            let mut fs: Vec<f64> = focals.iter().filter_map(|f| f.1).collect();
+            fs.sort_by(f64::total_cmp);
+            let distinct = fs.windows(2).filter(|w| w[0] != w[1]).count() + 1;
+            let note = (distinct > 1).then(|| {
+                format!(
+                    "the median of the focal lengths of the {} matched images",
+                    fs.len()
+                )
+            });
+            (Some(median(&fs)), note)
+        }
+    };
+    let reference = Scene {
+        path: model.dir.clone(),
+        kind: SceneKind::Colmap,
+        camera_model: CameraModel::Perspective,
+        euclidean: true,
+        structure: "points3D.txt",
+        points: matched
+            .iter()
+            .map(|&(k, q)| {
+                let p = &model.points[q];
+                (est.points[k].0.clone(), finite3(p.xyz))
+            })
+            .collect(),
+        frames,
+        focal_px,
+        rms_px: None,
+    };
+    let mut c = compare(est, &reference)?;
+    c.points.reference = model.points.len();
+    c.frames.reference = model.images.len();
+    let unmatched_examples: Vec<Id> = unmatched
+        .iter()
+        .take(10)
+        .map(|&k| est.points[k].0.clone())
+        .collect();
+    c.matching = Some(ColmapMatching {
+        observations: obs.source.clone(),
+        tolerance_px,
+        images: model.images.len(),
+        images_by_name: by_name,
+        images_by_stem: by_stem,
+        images_unmatched: model.images.len() - by_name - by_stem,
+        tracks,
+        tracks_matched: matched.len(),
+        tracks_unmatched: unmatched.iter().filter(|&&k| !ambiguous[k]).count(),
+        tracks_ambiguous: unmatched.iter().filter(|&&k| ambiguous[k]).count(),
+        unmatched_examples,
+        agreement: if total > 0 {
+            agree as f64 / total as f64
+        } else {
+            0.0
+        },
+        camera_models,
+        intrinsics_note,
+    });
+    Ok(c)
+}
+
+/// Scores the reconstruction at `estimate` ([`load_estimate`]) against `reference`: a
+/// `truth.json` or `reconstruction.json` ([`load_reference`], then [`compare`]), or a
+/// COLMAP text model — its folder, or one of its three files (a file named `cameras.txt`,
+/// `images.txt` or `points3D.txt`, or starting with COLMAP's header comment, stands for
+/// its folder). Against a COLMAP model:
+///
+/// * **frames**: an image matches the estimate frame whose id is its name (rank3's export
+///   names images by frame id), or else — one to one — the frame whose id is its stem (the
+///   name without folder and extension; a number equals an integer id whatever its leading
+///   zeros: `frames/000042.png` is frame 42);
+/// * **points**: the estimate's 2D observations are read from its own COLMAP export
+///   (`colmap/` next to `reconstruction.json`) or from [`EvalOptions::tracks`]. In each
+///   matched image, each observation of a track votes for the 3D point of the nearest
+///   keypoint within [`EvalOptions::match_tolerance_px`]; a track matches the point
+///   holding a strict majority of its votes, at least 2; a point chosen by several tracks
+///   goes to the one with the most votes (to none on a tie). [`ColmapMatching`] reports the
+///   counts;
+/// * the reference is then a Euclidean perspective side (no reflection against a
+///   perspective estimate), with camera centres `−Rᵀt` and the focal length of its
+///   cameras ([`crate::colmap::ReferenceCamera::focal_px`]); the figures are
+///   [`compare`]'s.
+///
+/// Errors: those of [`load_estimate`] and [`load_reference`]; [`EvalError::Input`]
+/// (a malformed COLMAP model: file, line and field); [`EvalError::NoCommonFrames`],
+/// [`EvalError::NoObservations`], [`EvalError::NoMatchedPoints`],
+/// [`EvalError::InvalidTolerance`]; [`compare`]'s.
+pub fn evaluate_with(
+    estimate: &Path,
+    reference: &Path,
+    opts: &EvalOptions,
+) -> Result<Comparison, EvalError> {
+    let tol = opts.match_tolerance_px;
+    if !(tol > 0.0 && tol.is_finite()) {
+        return Err(EvalError::InvalidTolerance(tol));
+    }
     let est = load_estimate(estimate)?;
-    let reference = load_reference(reference)?;
-    compare(&est, &reference)
+    match resolve_reference(reference)? {
+        ReferencePath::Json(file) => compare(&est, &load_json_reference(&file)?),
+        ReferencePath::Colmap(dir) => {
+            let model = crate::colmap::read_reference(&dir)?;
+            let obs = estimate_observations(&est, &dir, opts)?;
+            compare_colmap(&est, &model, &obs, tol)
+        }
+    }
 }
 
 fn camera_name(c: CameraModel) -> String {
@@ -621,7 +1287,9 @@ impl fmt::Display for Comparison {
         let kind = match self.reference_kind {
             SceneKind::Truth => "ground truth",
             SceneKind::Reconstruction => "reconstruction",
+            SceneKind::Colmap => "COLMAP model",
         };
+        let m = self.matching.as_ref();
         writeln!(f, "estimate   {}", self.estimate.display())?;
         writeln!(f, "reference  {} ({kind})", self.reference.display())?;
         writeln!(f)?;
@@ -636,19 +1304,58 @@ impl fmt::Display for Comparison {
             ),
         )?;
         let p = &self.points;
+        let (common, sides) = match m {
+            Some(_) => ("tracks matched to 3D points", (" tracks", " 3D points")),
+            None => ("common track ids", ("", "")),
+        };
         row(
             f,
             "points",
             format!(
-                "{} compared of {} common track ids (estimate {}, reference {}; {} vs {})",
+                "{} compared of {} {common} (estimate {}{}, reference {}{}; {} vs {})",
                 p.compared,
                 p.common,
                 p.estimate,
+                sides.0,
                 p.reference,
+                sides.1,
                 self.estimate_structure,
                 self.reference_structure
             ),
         )?;
+        if let Some(m) = m {
+            row(
+                f,
+                "matching",
+                format!(
+                    "{} of {} tracks seen in the matched images matched ({} unmatched, {} \
+                     ambiguous{}); {:.1} % of their observations within {} px of their 3D \
+                     point's keypoints (observations from {})",
+                    m.tracks_matched,
+                    m.tracks,
+                    m.tracks_unmatched,
+                    m.tracks_ambiguous,
+                    if m.unmatched_examples.is_empty() {
+                        String::new()
+                    } else {
+                        let ids: Vec<String> =
+                            m.unmatched_examples.iter().map(|i| i.to_string()).collect();
+                        format!(
+                            ": {}{}",
+                            ids.join(", "),
+                            if m.tracks_unmatched + m.tracks_ambiguous > ids.len() {
+                                ", …"
+                            } else {
+                                ""
+                            }
+                        )
+                    },
+                    100.0 * m.agreement,
+                    m.tolerance_px,
+                    m.observations.display()
+                ),
+            )?;
+        }
         let s = &self.structure;
         row(
             f,
@@ -670,10 +1377,22 @@ impl fmt::Display for Comparison {
         row(
             f,
             "frames",
-            format!(
-                "{} common frame ids (estimate {}, reference {})",
-                fr.common, fr.estimate, fr.reference
-            ),
+            match m {
+                Some(m) => format!(
+                    "{} matched images (estimate {} frames, reference {} images: {} by name, \
+                     {} by stem, {} unmatched)",
+                    fr.common,
+                    fr.estimate,
+                    fr.reference,
+                    m.images_by_name,
+                    m.images_by_stem,
+                    m.images_unmatched
+                ),
+                None => format!(
+                    "{} common frame ids (estimate {}, reference {})",
+                    fr.common, fr.estimate, fr.reference
+                ),
+            },
         )?;
         let none = |why: &str| format!("— ({why})");
         row(
@@ -699,15 +1418,20 @@ impl fmt::Display for Comparison {
                 None => none("perspective on both sides only"),
             },
         )?;
+        let note = m.and_then(|m| m.intrinsics_note.as_deref());
         row(
             f,
             "focal length",
-            match &self.focal {
-                Some(x) => format!(
-                    "{:.2} px vs {:.2} px: {:+.3} %",
-                    x.estimate_px, x.reference_px, x.error_pct
+            match (&self.focal, note) {
+                (Some(x), note) => format!(
+                    "{:.2} px vs {:.2} px: {:+.3} %{}",
+                    x.estimate_px,
+                    x.reference_px,
+                    x.error_pct,
+                    note.map_or(String::new(), |n| format!(" (reference: {n})"))
                 ),
-                None => none("both sides need one"),
+                (None, Some(n)) => none(n),
+                (None, None) => none("both sides need one"),
             },
         )?;
         let rms = |r: Option<f64>| r.map_or("—".to_string(), |r| format!("{r:.4} px"));
@@ -720,5 +1444,53 @@ impl fmt::Display for Comparison {
                 rms(self.reference_rms_px)
             ),
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ids(v: &[&str]) -> Vec<Id> {
+        v.iter().map(|s| Id::parse(s)).collect()
+    }
+
+    #[test]
+    fn image_names_match_frame_ids_by_name_then_stem() {
+        assert_eq!(image_stem("frames/000042.png"), "000042");
+        assert_eq!(image_stem("a\\b\\img.v2.jpg"), "img.v2");
+        assert_eq!(image_stem(".hidden"), ".hidden");
+        assert_eq!(image_stem("7"), "7");
+        // rank3's export names images by their frame id: exact names first.
+        let frames = ids(&["0", "1", "2", "frame_0007"]);
+        let got = match_frames(&["2", "000001.png", "x/frame_0007.jpg", "zz.png"], &frames);
+        assert_eq!(
+            got,
+            vec![Some((2, true)), Some((1, false)), Some((3, false)), None]
+        );
+        // A frame two stems claim, and a stem whose frame was taken by its exact name, are
+        // left out.
+        let got = match_frames(&["1.png", "01.jpg", "0", "0.png"], &frames);
+        assert_eq!(got, vec![None, None, Some((0, true)), None]);
+        // String ids that look like numbers match their text.
+        let frames = vec![Id::Str("0042".into()), Id::Str("a b".into())];
+        let got = match_frames(&["0042.png", "a_b"], &frames);
+        assert_eq!(got, vec![Some((0, false)), Some((1, true))]);
+    }
+
+    #[test]
+    fn the_nearest_keypoint_with_a_point_within_the_tolerance_votes() {
+        let kps = vec![
+            ([10.0, 10.0], Some(1)),
+            ([11.0, 10.0], None),
+            ([12.5, 10.0], Some(2)),
+            ([-3.0, -3.0], Some(3)),
+        ];
+        let g = KeypointGrid::new(&kps, 2.0);
+        assert_eq!(g.nearest(&[10.9, 10.0]), Some(1));
+        assert_eq!(g.nearest(&[11.9, 10.0]), Some(2));
+        assert_eq!(g.nearest(&[14.6, 10.0]), None);
+        assert_eq!(g.nearest(&[-1.5, -2.5]), Some(3));
+        assert_eq!(g.nearest(&[f64::NAN, 0.0]), None);
     }
 }

@@ -526,3 +526,461 @@ fn eval_reports_bad_references_as_typed_errors() {
         Err(EvalError::Truth { .. })
     ));
 }
+
+// ---------------------------------------------------------------------------------------
+// COLMAP references.
+
+/// A perspective scene (12 frames × 60 points, 20 % missing) reconstructed with the
+/// perspective camera: `d/out/` with its COLMAP export `d/out/colmap/`.
+fn perspective_with_export(name: &str, seed: &str, noise: &str) -> PathBuf {
+    let d = synth_and_reconstruct(
+        name,
+        &[
+            "--frames",
+            "12",
+            "--points",
+            "60",
+            "--noise",
+            noise,
+            "--missing",
+            "0.2",
+            "--camera",
+            "perspective",
+            "--distance",
+            "2.5",
+            "--seed",
+            seed,
+        ],
+        &["--camera", "perspective", "--image-size", "640,480"],
+    );
+    assert!(d.join("out/colmap/images.txt").is_file());
+    d
+}
+
+/// Copies the three files of a COLMAP text model.
+fn copy_model(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for f in ["cameras.txt", "images.txt", "points3D.txt"] {
+        std::fs::copy(from.join(f), to.join(f)).unwrap();
+    }
+}
+
+/// Replaces line `line` (1-based) of `path` by `f(old line)`.
+fn edit_line(path: &Path, line: usize, f: impl FnOnce(&str) -> String) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    lines[line - 1] = f(&lines[line - 1]);
+    std::fs::write(path, lines.join("\n") + "\n").unwrap();
+}
+
+fn f64_at(v: &serde_json::Value, path: &[&str]) -> f64 {
+    let mut x = v;
+    for k in path {
+        x = &x[*k];
+    }
+    x.as_f64().unwrap_or_else(|| panic!("{path:?} in {v}"))
+}
+
+#[test]
+fn eval_scores_a_reconstruction_against_its_own_colmap_export() {
+    let d = perspective_with_export("colmap-self", "21", "0.3");
+    let out = d.join("out");
+    let v = eval_json(&out.join("reconstruction.json"), &out.join("colmap"));
+    assert_eq!(v["reference_kind"], "colmap");
+    assert_eq!(v["reference_structure"], "points3D.txt");
+    assert_eq!(v["structure"]["reflection_allowed"], false);
+    assert!(structure_pct(&v) < 1e-6, "{v}");
+    assert!(f64_at(&v, &["rotation_deg", "max"]) < 1e-6, "{v}");
+    assert!(f64_at(&v, &["centre_pct", "max"]) < 1e-6, "{v}");
+    assert!(f64_at(&v, &["focal", "error_pct"]).abs() < 1e-9, "{v}");
+    // Every fitted track and every image matched, all by name.
+    let rec = reconstruction_file::read(&out.join("reconstruction.json")).unwrap();
+    let per = rec.perspective.as_ref().unwrap();
+    let inliers = per.points.iter().filter(|p| p.inlier).count();
+    let m = &v["matching"];
+    assert_eq!(m["images"], per.cameras.len());
+    assert_eq!(m["images_by_name"], per.cameras.len());
+    assert_eq!(m["tracks_matched"], inliers);
+    assert_eq!(m["tracks_unmatched"], 0);
+    assert_eq!(m["agreement"], 1.0);
+    assert_eq!(v["points"]["compared"], inliers);
+    assert_eq!(v["frames"]["common"], per.cameras.len());
+    assert_eq!(
+        f64_at(&v, &["estimate_rms_px"]),
+        rec.rms_px,
+        "the reconstruction's RMS"
+    );
+    // One of the three files stands for the folder; the table names the matching.
+    for file in ["images.txt", "cameras.txt", "points3D.txt"] {
+        let w = eval_json(&out, &out.join("colmap").join(file));
+        assert!(structure_pct(&w) < 1e-6, "{file}: {w}");
+    }
+    let table = run_ok(
+        bin()
+            .arg("eval")
+            .arg(&out)
+            .arg("-r")
+            .arg(out.join("colmap")),
+    );
+    for row in [
+        "(COLMAP model)",
+        "matching",
+        "by name",
+        "no reflection",
+        "focal length",
+    ] {
+        assert!(table.contains(row), "{table}");
+    }
+    eprintln!("{table}");
+
+    // A camera model whose focal length is not compared: said so, the rest scored.
+    let fisheye = d.join("fisheye");
+    copy_model(&out.join("colmap"), &fisheye);
+    let cams = std::fs::read_to_string(fisheye.join("cameras.txt")).unwrap();
+    let line = cams.lines().position(|l| !l.starts_with('#')).unwrap() + 1;
+    edit_line(&fisheye.join("cameras.txt"), line, |l| {
+        let t: Vec<&str> = l.split(' ').collect();
+        format!(
+            "{} OPENCV_FISHEYE {} {} {} {} {} {} 0 0 0 0",
+            t[0], t[2], t[3], t[4], t[4], t[5], t[6]
+        )
+    });
+    let v = eval_json(&out, &fisheye);
+    assert!(v["focal"].is_null(), "{v}");
+    let note = v["matching"]["intrinsics_note"].as_str().unwrap();
+    assert!(
+        note.contains("OPENCV_FISHEYE") && note.contains("not compared"),
+        "{v}"
+    );
+    assert!(structure_pct(&v) < 1e-6, "{v}");
+    let table = run_ok(bin().arg("eval").arg(&out).arg("-r").arg(&fisheye));
+    assert!(table.contains("intrinsics not compared"), "{table}");
+}
+
+/// `truth.json` of a perspective scene written as a COLMAP model the way a model made
+/// elsewhere would differ from rank3's export: images named `frames/0000NN.png` and listed
+/// backwards with their own ids, 3D point ids unrelated to the track ids, keypoints off by
+/// up to 0.45 px, keypoints without a 3D point, one `PINHOLE` camera per image.
+fn truth_as_colmap(d: &Path, to: &Path) {
+    use rank3::colmap::{ColmapCamera, ColmapCameraModel, ColmapImage, ColmapModel, ColmapPoint};
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("truth.json")).unwrap()).unwrap();
+    let table = rank3::TrackTable::read(d.join("tracks.csv")).unwrap();
+    let m3 = |a: &serde_json::Value| nalgebra::Matrix3::from_fn(|i, j| a[i][j].as_f64().unwrap());
+    let frames = truth["frames"].as_array().unwrap();
+    let n_points = truth["points"].as_array().unwrap().len();
+    let point_id = |p: usize| 1000 + 7 * (n_points - p) as u64;
+    let mut points: Vec<ColmapPoint> = (0..n_points)
+        .map(|p| {
+            let xyz = &truth["points"][p]["xyz"];
+            ColmapPoint {
+                id: point_id(p),
+                xyz: std::array::from_fn(|k| xyz[k].as_f64().unwrap()),
+                rgb: [200, 100, 50],
+                error: 0.5,
+                track: Vec::new(),
+            }
+        })
+        .collect();
+    let (mut cameras, mut images) = (Vec::new(), Vec::new());
+    for (f, fr) in frames.iter().enumerate().rev() {
+        assert_eq!(table.frame_ids()[f], Id::Int(fr["frame"].as_i64().unwrap()));
+        let id = 50 + f as u32;
+        let k = m3(&fr["K"]);
+        cameras.push(ColmapCamera {
+            id,
+            model: ColmapCameraModel::Pinhole {
+                fx: k[(0, 0)],
+                fy: k[(1, 1)],
+                cx: k[(0, 2)] + 0.5,
+                cy: k[(1, 2)] + 0.5,
+            },
+            width: 640,
+            height: 480,
+        });
+        let t = &fr["t"];
+        let mut points2d = vec![([3.0, 4.0], None)];
+        for p in 0..table.n_tracks() {
+            let Some([x, y]) = table.get(f, p) else {
+                continue;
+            };
+            let s = (f * 31 + p * 17) as f64;
+            let jitter = [0.45 * s.sin(), 0.45 * (1.7 * s).cos()];
+            points[p].track.push((id, points2d.len()));
+            points2d.push((
+                [x + 0.5 + jitter[0], y + 0.5 + jitter[1]],
+                Some(point_id(p)),
+            ));
+            if p % 5 == 0 {
+                points2d.push(([x + 9.0, y - 7.0], None));
+            }
+        }
+        images.push(ColmapImage {
+            id,
+            camera_id: id,
+            name: format!("frames/{f:06}.png"),
+            rotation: m3(&fr["R"]),
+            translation: Vector3::new(
+                t[0].as_f64().unwrap(),
+                t[1].as_f64().unwrap(),
+                t[2].as_f64().unwrap(),
+            ),
+            points2d,
+        });
+    }
+    points.retain(|p| !p.track.is_empty());
+    ColmapModel {
+        cameras,
+        images,
+        points,
+    }
+    .write_text(to)
+    .unwrap();
+}
+
+#[test]
+fn eval_against_the_truth_and_its_colmap_model_agree() {
+    let d = perspective_with_export("colmap-truth", "22", "0.3");
+    let truth_model = d.join("truth_colmap");
+    truth_as_colmap(&d, &truth_model);
+    let out = d.join("out");
+    let a = eval_json(&out, &d.join("truth.json"));
+    let b = eval_json(&out, &truth_model);
+    eprintln!("truth.json: {a}\nCOLMAP model of the truth: {b}");
+    assert_eq!(b["reference_kind"], "colmap");
+    // The same points and frames compared, and the same figures.
+    assert_eq!(a["points"]["compared"], b["points"]["compared"], "{b}");
+    assert_eq!(a["frames"]["common"], b["frames"]["common"], "{b}");
+    assert_eq!(b["matching"]["images_by_stem"], b["frames"]["common"]);
+    assert_eq!(b["matching"]["images_by_name"], 0);
+    assert_eq!(b["matching"]["tracks_unmatched"], 0);
+    assert_eq!(b["matching"]["tracks_ambiguous"], 0);
+    for path in [
+        &["structure", "rms_pct"][..],
+        &["structure", "max_pct"],
+        &["structure", "scale"],
+        &["rotation_deg", "median"],
+        &["rotation_deg", "max"],
+        &["centre_pct", "rms"],
+        &["centre_pct", "max"],
+        &["focal", "reference_px"],
+        &["focal", "error_pct"],
+    ] {
+        let (x, y) = (f64_at(&a, path), f64_at(&b, path));
+        assert!(
+            (x - y).abs() <= 1e-9 * x.abs().max(1e-6),
+            "{path:?}: {x} (truth.json) vs {y} (COLMAP)"
+        );
+    }
+    // A reasonable reconstruction, not a vacuous agreement.
+    assert!(structure_pct(&a) > 1e-4 && structure_pct(&a) < 2.0, "{a}");
+    assert_eq!(f64_at(&b, &["focal", "reference_px"]), 500.0);
+
+    // Another reconstruction of the same scene with twice the image noise, scored against
+    // the first one's export: matched by observations 0.5 px apart, and as close to it as
+    // their errors against the truth allow.
+    let e = perspective_with_export("colmap-noisier", "22", "0.6");
+    let t = eval_json(&e.join("out"), &d.join("truth.json"));
+    let v = eval_json(&e.join("out"), &out.join("colmap"));
+    let m = &v["matching"];
+    assert_eq!(m["images_unmatched"], 0, "{v}");
+    assert!(f64_at(m, &["agreement"]) > 0.9, "{v}");
+    let (sa, st, sv) = (structure_pct(&a), structure_pct(&t), structure_pct(&v));
+    eprintln!("structure errors: first {sa} %, second {st} %, second vs first {sv} %");
+    assert!(
+        sv < 1.5 * (sa + st) + 0.01 && sv > 0.2 * (st - sa).abs(),
+        "{v}"
+    );
+}
+
+#[test]
+fn a_malformed_colmap_reference_names_the_file_and_line() {
+    let d = perspective_with_export("colmap-bad", "23", "0.3");
+    let out = d.join("out");
+    let bad = d.join("bad");
+    copy_model(&out.join("colmap"), &bad);
+    // Line 7 is the second image's first line (4 comment lines, then 2 lines per image).
+    edit_line(&bad.join("images.txt"), 7, |l| {
+        let mut t: Vec<&str> = l.split(' ').collect();
+        t[2] = "zero";
+        t.join(" ")
+    });
+    match compare::evaluate(&out, &bad) {
+        Err(EvalError::Input(rank3::Error::Parse {
+            path, line, field, ..
+        })) => {
+            assert_eq!(path, bad.join("images.txt"));
+            assert_eq!((line, field.as_str()), (7, "QX"));
+        }
+        other => panic!("{other:?}"),
+    }
+    let err = run_err(bin().arg("eval").arg(&out).arg("-r").arg(&bad));
+    assert!(err.contains("images.txt:7") && err.contains("QX"), "{err}");
+    // A keypoint line cut short, and a camera with the wrong number of parameters.
+    copy_model(&out.join("colmap"), &bad);
+    edit_line(&bad.join("images.txt"), 8, |l| format!("{l} 12.5"));
+    let err = run_err(
+        bin()
+            .arg("eval")
+            .arg(&out)
+            .arg("-r")
+            .arg(bad.join("images.txt")),
+    );
+    assert!(
+        err.contains("images.txt:8") && err.contains("POINT3D_ID"),
+        "{err}"
+    );
+    copy_model(&out.join("colmap"), &bad);
+    edit_line(&bad.join("cameras.txt"), 4, |l| {
+        l.replacen("SIMPLE_PINHOLE", "OPENCV", 1)
+    });
+    match compare::evaluate(&out, &bad) {
+        Err(EvalError::Input(rank3::Error::Parse { line, field, .. })) => {
+            assert_eq!((line, field.as_str()), (4, "PARAMS"))
+        }
+        other => panic!("{other:?}"),
+    }
+    // A missing file is named.
+    copy_model(&out.join("colmap"), &bad);
+    std::fs::remove_file(bad.join("points3D.txt")).unwrap();
+    let err = run_err(bin().arg("eval").arg(&out).arg("-r").arg(&bad));
+    assert!(err.contains("points3D.txt"), "{err}");
+}
+
+#[test]
+fn a_colmap_reference_sharing_no_frame_or_no_observation_is_refused() {
+    let d = perspective_with_export("colmap-disjoint", "24", "0.3");
+    let out = d.join("out");
+    let other = d.join("other");
+    copy_model(&out.join("colmap"), &other);
+    // Every image renamed: no name or stem is a frame id.
+    let text = std::fs::read_to_string(other.join("images.txt")).unwrap();
+    let mut k = 0;
+    let renamed: Vec<String> = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i >= 4 && i % 2 == 0 {
+                k += 1;
+                let mut t: Vec<String> = l.split(' ').map(str::to_string).collect();
+                t[9] = format!("view_{k}.jpg");
+                t.join(" ")
+            } else {
+                l.to_string()
+            }
+        })
+        .collect();
+    std::fs::write(other.join("images.txt"), renamed.join("\n") + "\n").unwrap();
+    match compare::evaluate(&out, &other) {
+        Err(EvalError::NoCommonFrames {
+            estimate,
+            reference,
+            reference_examples,
+            ..
+        }) => {
+            assert_eq!(estimate, out.join("reconstruction.json"));
+            assert_eq!(reference, other);
+            assert!(
+                reference_examples.contains("view_1.jpg"),
+                "{reference_examples}"
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+    let err = run_err(bin().arg("eval").arg(&out).arg("-r").arg(&other));
+    assert!(
+        err.contains("share no frame") && err.contains("view_1.jpg"),
+        "{err}"
+    );
+
+    // An estimate without observations (an affine result has no COLMAP export): refused,
+    // saying what to give; with its track table, scored.
+    run_ok(
+        bin()
+            .arg("reconstruct")
+            .arg(d.join("tracks.csv"))
+            .arg("--out")
+            .arg(d.join("affine"))
+            .args(["--camera", "scaled-orthographic"]),
+    );
+    match compare::evaluate(&d.join("affine"), &out.join("colmap")) {
+        Err(EvalError::NoObservations { reason, .. }) => {
+            assert!(reason.contains("--tracks"), "{reason}")
+        }
+        other => panic!("{other:?}"),
+    }
+    let opts = compare::EvalOptions {
+        tracks: Some(d.join("tracks.csv")),
+        ..Default::default()
+    };
+    let c = compare::evaluate_with(&d.join("affine"), &out.join("colmap"), &opts).unwrap();
+    let m = c.matching.as_ref().unwrap();
+    // Every 3D point of the export is one track of the table; the table's observations
+    // that the export marks as outliers (`-1`) do not vote.
+    let exported = std::fs::read_to_string(out.join("colmap/points3D.txt"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .count();
+    assert_eq!(m.tracks_matched, exported, "{m:?}");
+    assert_eq!(m.tracks_ambiguous, 0, "{m:?}");
+    assert!(m.agreement > 0.9, "{m:?}");
+    assert!(c.structure.reflection_allowed && c.structure.rms_pct.is_finite());
+    // The truth's COLMAP-free reference is unchanged: a truth.json still reads.
+    assert!(compare::evaluate(&d.join("affine"), &d.join("truth.json")).is_ok());
+    // A tolerance that is not a positive number.
+    let opts = compare::EvalOptions {
+        match_tolerance_px: 0.0,
+        ..Default::default()
+    };
+    assert!(matches!(
+        compare::evaluate_with(&out, &out.join("colmap"), &opts),
+        Err(EvalError::InvalidTolerance(_))
+    ));
+}
+
+/// The model as COLMAP's own writer (pycolmap) writes it, with an `OPENCV` camera and
+/// images renamed `img_000NN.jpg`... skipped without pycolmap.
+#[test]
+fn eval_reads_a_colmap_model_written_by_pycolmap() {
+    let python = std::env::var("RANK3_PYTHON").unwrap_or_else(|_| "python3".into());
+    let has = std::process::Command::new(&python)
+        .args(["-c", "import pycolmap"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !has {
+        eprintln!("SKIPPED: `{python}` cannot import pycolmap (set RANK3_PYTHON)");
+        return;
+    }
+    let d = perspective_with_export("colmap-pycolmap", "25", "0.3");
+    let out = d.join("out");
+    let written = d.join("pycolmap");
+    std::fs::create_dir_all(&written).unwrap();
+    let script = r#"
+import sys, pycolmap
+rec = pycolmap.Reconstruction(sys.argv[1])
+for cid, cam in rec.cameras.items():
+    f, cx, cy = list(cam.params)[:3]
+    cam.model = pycolmap.CameraModelId.OPENCV
+    cam.params = [f, f, cx, cy, 0.0, 0.0, 0.0, 0.0]
+for iid, img in rec.images.items():
+    img.name = "images/%06d.jpg" % int(img.name)
+rec.write_text(sys.argv[2])
+"#;
+    let o = std::process::Command::new(&python)
+        .args(["-c", script])
+        .arg(out.join("colmap"))
+        .arg(&written)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = eval_json(&out, &written);
+    assert_eq!(
+        v["matching"]["images_by_stem"], v["frames"]["reference"],
+        "{v}"
+    );
+    assert_eq!(v["matching"]["camera_models"][0], "OPENCV");
+    assert!(structure_pct(&v) < 1e-6, "{v}");
+    assert!(f64_at(&v, &["rotation_deg", "max"]) < 1e-6, "{v}");
+    assert!(f64_at(&v, &["focal", "error_pct"]).abs() < 1e-9, "{v}");
+}

@@ -75,8 +75,9 @@ pub enum Command {
     Track(track::TrackArgs),
     /// Video or images → tracks → reconstruction, in one command.
     Run(run::RunArgs),
-    /// Score a reconstruction against a reference (synth's truth.json or another
-    /// reconstruction.json): structure, rotation, camera centre and focal length errors.
+    /// Score a reconstruction against a reference (synth's truth.json, another
+    /// reconstruction.json, or a COLMAP text model): structure, rotation, camera centre and
+    /// focal length errors.
     Eval(eval::EvalArgs),
 }
 
