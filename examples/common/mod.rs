@@ -12,3 +12,73 @@ pub fn peak_rss_mb() -> f64 {
         })
         .map_or(f64::NAN, |kb| kb / 1024.0)
 }
+
+/// Errors of a metric perspective model against a synthetic scene's exact cameras
+/// ([`perspective_errors`]).
+#[allow(dead_code)]
+pub struct PerspectiveErrors {
+    /// Per fitted frame, `|f_est − f_true| / f_true` against that frame's true focal length.
+    pub focal: Vec<f64>,
+    /// Largest rotation error over the fitted frames, degrees, after the points' alignment.
+    pub rot_max_deg: f64,
+    /// RMS point distance after the best proper similarity, over the truth's RMS spread.
+    pub structure: f64,
+}
+
+/// Angle of `a bᵀ`, degrees.
+#[allow(dead_code)]
+pub fn rot_err_deg(a: &nalgebra::Matrix3<f64>, b: &nalgebra::Matrix3<f64>) -> f64 {
+    let d = a * b.transpose();
+    ((d.trace() - 1.0) / 2.0)
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees()
+}
+
+/// [`PerspectiveErrors`] of `model` (frames `kept_frames` × tracks `kept_tracks` of the
+/// scene, in that order) against the truth of the perspective scene `s`: the points are
+/// aligned by a proper similarity (a Euclidean reconstruction has no mirror ambiguity),
+/// rotations are compared through that alignment, focal lengths frame by frame. The
+/// accuracy measure of `perspective_benchmark` and `perspective_models`.
+#[allow(dead_code)]
+pub fn perspective_errors(
+    model: &rank3::perspective::PerspectiveModel,
+    kept_frames: &[usize],
+    kept_tracks: &[usize],
+    s: &rank3::synth::SynthScene,
+) -> PerspectiveErrors {
+    let truth = s.perspective.as_ref().expect("a perspective scene");
+    let tp: Vec<nalgebra::Vector3<f64>> = kept_tracks.iter().map(|&p| s.truth.points[p]).collect();
+    let al = rank3::eval::align_similarity(&model.points, &tp, false).expect("alignment");
+    let mut rot_max_deg: f64 = 0.0;
+    let mut focal = Vec::with_capacity(kept_frames.len());
+    for (k, &f) in kept_frames.iter().enumerate() {
+        rot_max_deg = rot_max_deg.max(rot_err_deg(
+            &(model.rotations[k] * al.rotation.transpose()),
+            truth.rotations[f].matrix(),
+        ));
+        let f_true = truth.intrinsics[f][(0, 0)];
+        focal.push((model.focal_px[k] - f_true).abs() / f_true);
+    }
+    PerspectiveErrors {
+        focal,
+        rot_max_deg,
+        structure: al.relative_rms,
+    }
+}
+
+/// The exact cameras and points of the perspective scene `s` as a start model for
+/// [`rank3::perspective::adjust`] (the accuracy floor: the adjustment started at the
+/// truth): per-frame focal lengths, principal point and `k₁` as generated.
+#[allow(dead_code)]
+pub fn truth_model(s: &rank3::synth::SynthScene) -> rank3::perspective::PerspectiveModel {
+    let t = s.perspective.as_ref().expect("a perspective scene");
+    rank3::perspective::PerspectiveModel {
+        focal_px: t.intrinsics.iter().map(|k| k[(0, 0)]).collect(),
+        principal_point: [t.intrinsics[0][(0, 2)], t.intrinsics[0][(1, 2)]],
+        k1: t.k1,
+        rotations: t.rotations.iter().map(|r| *r.matrix()).collect(),
+        translations: t.translations.clone(),
+        points: s.truth.points.clone(),
+    }
+}

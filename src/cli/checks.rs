@@ -33,7 +33,17 @@ pub fn check(cli: &Cli, matches: &ArgMatches) -> Result<(), clap::Error> {
         Command::Synth(a) => {
             let perspective = matches!(a.camera, CameraArg::Perspective | CameraArg::Projective);
             if let Some(flag) = (!perspective)
-                .then(|| given_of(m, &[("focal", "--focal"), ("distance", "--distance")]))
+                .then(|| {
+                    given_of(
+                        m,
+                        &[
+                            ("focal", "--focal"),
+                            ("distance", "--distance"),
+                            ("zoom", "--zoom"),
+                            ("distortion", "--distortion"),
+                        ],
+                    )
+                })
                 .flatten()
             {
                 Some(format!(

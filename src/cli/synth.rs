@@ -34,6 +34,20 @@ pub struct SynthArgs {
     /// --camera perspective.
     #[arg(long, value_name = "D", default_value_t = rank3::synth::DEFAULT_DISTANCE)]
     pub distance: f64,
+    /// A zooming perspective camera: frame f's focal length is FOCAL · (1 + Z)^(f / (F − 1)),
+    /// from FOCAL to (1 + Z) · FOCAL over the sequence (Z > −1; 0 = fixed focal length).
+    /// Only with --camera perspective.
+    #[arg(long, value_name = "Z", default_value_t = 0.0)]
+    pub zoom: f64,
+    /// Radial distortion k₁ of the perspective camera (COLMAP's SIMPLE_RADIAL on normalised
+    /// coordinates: image = f (1 + k₁‖n‖²) n + c; 0 = none). Only with --camera perspective.
+    #[arg(
+        long,
+        value_name = "K1",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
+    pub distortion: f64,
     /// The object's shape.
     #[arg(long, value_enum, default_value = "house")]
     pub shape: ShapeArg,
@@ -93,6 +107,8 @@ pub fn synth(a: &SynthArgs) -> Result<(), rank3::Error> {
         seed: a.seed,
         focal: a.focal,
         distance: a.distance,
+        zoom: a.zoom,
+        distortion: a.distortion,
         ..SynthConfig::default()
     };
     let scene = rank3::synth::generate(&cfg)?;
