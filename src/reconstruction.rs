@@ -1232,6 +1232,32 @@ fn robust_stage(
             sel.flagged.retain(|&(_, p)| inlier[p]);
         }
     }
+    // The projective cameras need 6 tracks in every frame: an affine selection that starves
+    // a frame (the affine pass rejects tracks that only perspective explains, most where
+    // few tracks are seen) would leave the projective stages unusable. The projective
+    // model judges every track instead, as without a rigid majority.
+    if config.camera.is_projective() {
+        let nf = meas_all.n_frames();
+        let (mut all, mut selected) = (vec![0usize; nf], vec![0usize; nf]);
+        let mut is_flagged = std::collections::HashSet::new();
+        is_flagged.extend(sel.flagged.iter().copied());
+        for (f, p) in meas_all.observed_pairs() {
+            all[f] += 1;
+            if sel.inlier[p] && !is_flagged.contains(&(f, p)) {
+                selected[f] += 1;
+            }
+        }
+        if let Some(f) = (0..nf).find(|&f| selected[f] < 6 && all[f] >= 6) {
+            warnings.push(format!(
+                "the affine robust pass leaves {} track(s) in frame {} (of {}), fewer than a                  projective camera needs (6); the projective model judges every track instead",
+                selected[f], kept.table.frame_ids()[f], all[f]
+            ));
+            sel.inlier = vec![true; n];
+            sel.flagged.clear();
+            sel.other_groups.clear();
+            other_object_tracks = 0;
+        }
+    }
     let mut report = RobustReport {
         outlier_tracks: Vec::new(),
         flagged_entries: Vec::new(),
