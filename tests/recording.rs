@@ -73,6 +73,36 @@ impl Contents {
         out
     }
 
+    /// Scalars logged to `entity` (all rows concatenated).
+    fn scalars(&self, entity: &str) -> Vec<f64> {
+        let id = rerun::Scalars::descriptor_scalars().component;
+        let mut out = Vec::new();
+        for c in self.of(entity) {
+            for row in c.iter_component::<rerun::components::Scalar>(id) {
+                out.extend(row.iter().map(|s| s.0.0));
+            }
+        }
+        out
+    }
+
+    /// The `show_labels` flags logged to `entity` under `component` (all rows).
+    fn show_labels(&self, entity: &str, component: rerun::ComponentIdentifier) -> Vec<bool> {
+        let mut out = Vec::new();
+        for c in self.of(entity) {
+            for row in c.iter_component::<rerun::components::ShowLabels>(component) {
+                out.extend(row.iter().map(|s| s.0.0));
+            }
+        }
+        out
+    }
+
+    /// The chunks of `entity`.
+    fn of<'a>(&'a self, entity: &'a str) -> impl Iterator<Item = &'a Chunk> + 'a {
+        self.chunks
+            .iter()
+            .filter(move |c| c.entity_path().to_string().trim_start_matches('/') == entity)
+    }
+
     /// Positions logged to `entity` (all rows concatenated).
     fn positions3(&self, entity: &str) -> Vec<[f32; 3]> {
         let id = rerun::Points3D::descriptor_positions().component;
@@ -334,9 +364,75 @@ fn recording_round_trips_through_the_rerun_decoder() {
     let warnings = c.get(paths::LOG_WARNINGS, "TextLog:level");
     assert_eq!(warnings.rows(), result.warnings.len());
     assert!(!result.warnings.is_empty(), "set-aside tracks warn");
-    let cost0 = c.get("solver/probe/run0/cost", "Scalars:scalars");
+    // One entity per quantity and run (`solver/<quantity>/<solver>/run<k>`), so that the
+    // layout plots each quantity on its own axis; the cost also as log₁₀, λ (NaN here) not.
+    let cost0 = c.get(
+        &format!("{}/probe/run0", paths::SOLVER_COST),
+        "Scalars:scalars",
+    );
     assert_eq!(cost0.times["iteration"], vec![0, 1, 2]);
-    assert_eq!(c.get("solver/probe/run1/rms", "Scalars:scalars").rows(), 2);
+    assert_eq!(
+        c.get(
+            &format!("{}/probe/run1", paths::SOLVER_RMS),
+            "Scalars:scalars"
+        )
+        .rows(),
+        2
+    );
+    let log_cost = c.scalars(&format!("{}/probe/run0", paths::SOLVER_LOG10_COST));
+    let want: Vec<f64> = (0..3).map(|i| (10.0 / (1 + i) as f64).log10()).collect();
+    assert_eq!(log_cost.len(), 3);
+    for (got, want) in log_cost.iter().zip(&want) {
+        assert!((got - want).abs() < 1e-12, "log10 cost {got} vs {want}");
+    }
+    assert!(
+        !c.columns
+            .keys()
+            .any(|(e, _)| e.contains("lambda") && e.contains("probe")),
+        "a NaN λ is not logged"
+    );
+    // Track labels are not drawn on every point, strip and arrow (hover names them); the
+    // two set-aside tracks' labels are.
+    let no_labels = |entity: &str, component: rerun::ComponentIdentifier| {
+        let flags = c.show_labels(entity, component);
+        assert!(
+            !flags.is_empty() && flags.iter().all(|&s| !s),
+            "{entity}: {flags:?}"
+        );
+    };
+    no_labels(
+        paths::TRACKS,
+        rerun::Points2D::descriptor_show_labels().component,
+    );
+    no_labels(
+        paths::TRAJECTORIES,
+        rerun::LineStrips2D::descriptor_show_labels().component,
+    );
+    no_labels(
+        paths::RESIDUAL_ARROWS,
+        rerun::Arrows2D::descriptor_show_labels().component,
+    );
+    no_labels(
+        paths::POINTS,
+        rerun::Points3D::descriptor_show_labels().component,
+    );
+    no_labels(
+        paths::AFFINE_POINTS,
+        rerun::Points3D::descriptor_show_labels().component,
+    );
+    assert_eq!(
+        c.show_labels(
+            paths::SET_ASIDE_TRAJECTORIES,
+            rerun::LineStrips2D::descriptor_show_labels().component
+        ),
+        vec![true]
+    );
+    // The input trajectories are on the `frame` timeline too (at 0), where `rank3 track`'s
+    // recording opens.
+    assert_eq!(
+        c.get(paths::TRAJECTORIES, "LineStrips2D:strips").times["frame"],
+        vec![0]
+    );
     assert_eq!(c.get(paths::SUMMARY, "TextDocument:text").rows(), 1);
 
     // Robust pass.
@@ -453,6 +549,30 @@ fn reconstruct_recorded_with_outlier_tracks() {
     assert_eq!(
         c.get(paths::ROBUST_OUTLIERS, "LineStrips2D:strips").total(),
         no
+    );
+    // The few flagged (outlier) tracks are labelled on the image plane; in 3D (where nearby
+    // points' labels overlap) neither they nor the kept ones are: hover names them.
+    assert!(no <= 24);
+    assert_eq!(
+        c.show_labels(
+            paths::ROBUST_OUTLIERS,
+            rerun::LineStrips2D::descriptor_show_labels().component
+        ),
+        vec![true]
+    );
+    assert_eq!(
+        c.show_labels(
+            paths::OUTLIER_POINTS,
+            rerun::Points3D::descriptor_show_labels().component
+        ),
+        vec![false]
+    );
+    assert_eq!(
+        c.show_labels(
+            paths::POINTS,
+            rerun::Points3D::descriptor_show_labels().component
+        ),
+        vec![false]
     );
     let rgb = c.colors(
         paths::TRAJECTORIES,
@@ -645,19 +765,79 @@ fn cli_rrd_flag_records_synth_and_reconstruct() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// The views (class, origin) of the viewer layout (blueprint) saved in `path`, and whether
-/// the blueprint is sent complete and activated.
-fn saved_layout(path: &Path) -> (Vec<(String, String)>, bool) {
+/// One viewer layout (blueprint) saved in a recording.
+#[derive(Default, Debug)]
+struct SavedBlueprint {
+    /// View blueprint path → (class, origin).
+    views: BTreeMap<String, (String, String)>,
+    /// The timeline the time panel opens on.
+    timeline: Option<String>,
+    /// View blueprint path → the `EyeControls3D` (position, look target) it opens with.
+    eyes: BTreeMap<String, ([f32; 3], [f32; 3])>,
+    /// Sent complete and activated.
+    activated: bool,
+}
+
+impl SavedBlueprint {
+    /// The (class, origin) of every view.
+    fn view_list(&self) -> Vec<(String, String)> {
+        self.views.values().cloned().collect()
+    }
+
+    /// The eye (position, look target) of the view with origin `origin`.
+    fn eye_of(&self, origin: &str) -> Option<([f32; 3], [f32; 3])> {
+        let (path, _) = self.views.iter().find(|(_, (_, o))| o == origin)?;
+        self.eyes.get(path).copied()
+    }
+}
+
+/// The viewer layouts (blueprints) saved in `path`, in the order they were sent (the last
+/// activated one is the layout the viewer opens with).
+fn saved_blueprints(path: &Path) -> Vec<SavedBlueprint> {
     use rerun::external::arrow::array::{Array as _, StringArray};
     let file = std::fs::File::open(path).unwrap();
-    let (mut views, mut activated) = (BTreeMap::<String, (String, String)>::new(), false);
+    let mut order: Vec<String> = Vec::new();
+    let mut blueprints = BTreeMap::<String, SavedBlueprint>::new();
     for msg in DecoderApp::decode_lazy(BufReader::new(file)) {
         match msg.unwrap() {
-            LogMsg::BlueprintActivationCommand(cmd) => activated |= cmd.make_active,
+            LogMsg::BlueprintActivationCommand(cmd) => {
+                let id = format!("{:?}", cmd.blueprint_id);
+                blueprints.entry(id).or_default().activated |= cmd.make_active;
+            }
             LogMsg::ArrowMsg(store, arrow) if store.is_blueprint() => {
+                let id = format!("{store:?}");
+                if !order.contains(&id) {
+                    order.push(id.clone());
+                }
+                let bp = blueprints.entry(id).or_default();
                 let chunk = Chunk::from_arrow_msg(&arrow).unwrap();
                 let entity = chunk.entity_path().to_string();
-                if !entity.trim_start_matches('/').starts_with("view/") {
+                let entity = entity.trim_start_matches('/');
+                if let Some(view) = entity.strip_suffix("/EyeControls3D") {
+                    let id = |name: &str| {
+                        chunk
+                            .components()
+                            .0
+                            .values()
+                            .find(|c| c.descriptor.component.as_str() == name)
+                            .map(|c| c.descriptor.component)
+                    };
+                    let point = |name: &str| {
+                        let id = id(name).unwrap_or_else(|| panic!("{name} missing"));
+                        let p = chunk
+                            .iter_component::<Position3D>(id)
+                            .next()
+                            .and_then(|row| row.first().copied())
+                            .unwrap_or_else(|| panic!("{name} empty"));
+                        [p.x(), p.y(), p.z()]
+                    };
+                    bp.eyes.insert(
+                        format!("/{view}"),
+                        (
+                            point("EyeControls3D:position"),
+                            point("EyeControls3D:look_target"),
+                        ),
+                    );
                     continue;
                 }
                 for col in chunk.components().0.values() {
@@ -666,7 +846,13 @@ fn saved_layout(path: &Path) -> (Vec<(String, String)>, bool) {
                     let Some(text) = values.as_any().downcast_ref::<StringArray>() else {
                         continue;
                     };
-                    let view = views.entry(entity.clone()).or_default();
+                    if field == "TimePanelBlueprint:timeline" {
+                        bp.timeline = Some(text.value(0).to_string());
+                    }
+                    if !entity.starts_with("view/") {
+                        continue;
+                    }
+                    let view = bp.views.entry(format!("/{entity}")).or_default();
                     match field.as_str() {
                         "ViewBlueprint:class_identifier" => view.0 = text.value(0).to_string(),
                         "ViewBlueprint:space_origin" => view.1 = text.value(0).to_string(),
@@ -677,7 +863,30 @@ fn saved_layout(path: &Path) -> (Vec<(String, String)>, bool) {
             _ => {}
         }
     }
-    (views.into_values().collect(), activated)
+    order
+        .into_iter()
+        .filter_map(|id| blueprints.remove(&id))
+        .collect()
+}
+
+/// The views (class, origin) of the viewer layout (blueprint) saved in `path`, and whether
+/// the blueprint is sent complete and activated.
+fn saved_layout(path: &Path) -> (Vec<(String, String)>, bool) {
+    let last = saved_blueprints(path)
+        .into_iter()
+        .rev()
+        .find(|b| b.activated)
+        .expect("no activated layout");
+    (last.view_list(), last.activated)
+}
+
+/// The layout the viewer opens `path` with: the last activated one.
+fn opening_layout(path: &Path) -> SavedBlueprint {
+    saved_blueprints(path)
+        .into_iter()
+        .rev()
+        .find(|b| b.activated)
+        .expect("no activated layout")
 }
 
 /// `rank3 reconstruct --rrd` saves a viewer layout with the file: a 2D view of the image
@@ -709,7 +918,11 @@ fn cli_recordings_carry_a_viewer_layout() {
         view("BarChart", &format!("/{}", paths::SINGULAR_VALUES)),
         view("BarChart", &format!("/{}", paths::EIGENVALUES)),
         view("BarChart", &format!("/{}", paths::POINT_RMS)),
-        view("TimeSeries", "/solver"),
+        // The solvers' quantities each on their own axis: cost and λ as log₁₀.
+        view("TimeSeries", &format!("/{}", paths::SOLVER_LOG10_COST)),
+        view("TimeSeries", &format!("/{}", paths::SOLVER_LOG10_LAMBDA)),
+        view("TimeSeries", &format!("/{}", paths::SOLVER_RMS)),
+        view("TimeSeries", &format!("/{}", paths::SOLVER_INLIERS)),
         view("TimeSeries", &format!("/{}", paths::FRAME_RMS)),
         view("TextDocument", &format!("/{}", paths::SUMMARY)),
         view("TextLog", "/log"),
@@ -717,6 +930,54 @@ fn cli_recordings_carry_a_viewer_layout() {
         assert!(views.contains(&want), "{want:?} not in {views:?}");
     }
     assert!(!views.iter().any(|v| v.1 == "/truth"), "{views:?}");
+    // No plot mixes the solvers' quantities on one linear axis.
+    assert!(
+        !views
+            .iter()
+            .any(|v| v.0 == "TimeSeries" && (v.1 == "/solver" || v.1 == "/")),
+        "{views:?}"
+    );
+    let c = read_rrd(&dir.join("run.rrd"));
+    for quantity in [paths::SOLVER_LOG10_COST, paths::SOLVER_RMS] {
+        assert!(
+            c.columns
+                .keys()
+                .any(|(e, _)| e.starts_with(&format!("{quantity}/lm-refine/"))),
+            "no {quantity} series of the refinement"
+        );
+    }
+    // The layout the viewer opens: on the `stage` timeline, the 3D views framed on their
+    // points (the eye looks at the points' centroid from about twice their radius).
+    let layout = opening_layout(&dir.join("run.rrd"));
+    assert_eq!(layout.timeline.as_deref(), Some("stage"));
+    let points = c.positions3(paths::POINTS);
+    assert_eq!(points.len(), 20);
+    let n = points.len() as f32;
+    let centroid: [f32; 3] = std::array::from_fn(|a| points.iter().map(|p| p[a]).sum::<f32>() / n);
+    let radius = points
+        .iter()
+        .map(|p| {
+            (0..3)
+                .map(|a| (p[a] - centroid[a]).powi(2))
+                .sum::<f32>()
+                .sqrt()
+        })
+        .fold(0.0, f32::max);
+    let (eye, target) = layout.eye_of("/world").expect("the metric view has no eye");
+    let dist = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>().sqrt();
+    assert!(
+        dist(target, centroid) < 1e-3 * radius.max(1e-6),
+        "{target:?} vs {centroid:?}"
+    );
+    let eye_distance = dist(eye, target);
+    assert!(
+        eye_distance > 0.5 * radius && eye_distance < 4.0 * radius,
+        "eye {eye_distance} from the centroid, radius {radius}"
+    );
+    assert!(
+        layout.eye_of("/affine").is_some(),
+        "the affine view has no eye"
+    );
     rank3_ok([
         "synth",
         "--out",
@@ -730,6 +991,12 @@ fn cli_recordings_carry_a_viewer_layout() {
     ]);
     let (views, _) = saved_layout(&dir.join("synth.rrd"));
     assert!(views.contains(&view("3D", "/truth")), "{views:?}");
+    assert!(
+        opening_layout(&dir.join("synth.rrd"))
+            .eye_of("/truth")
+            .is_some(),
+        "the truth view has no eye"
+    );
     assert!(views.contains(&view("2D", "/image")), "{views:?}");
     assert!(!views.iter().any(|v| v.1 == "/world"), "{views:?}");
     std::fs::remove_dir_all(&dir).ok();
@@ -1182,6 +1449,17 @@ fn cli_track_records_frames_counts_and_tracks() {
     );
     let tracks = c.get(paths::TRACKS, "Points2D:positions");
     assert_eq!((tracks.rows(), tracks.total()), (nf, table.n_observed()));
+    // The recording opens on the `frame` timeline, where its frames, tracks and tracker
+    // counts live (on `stage` its plots are empty).
+    let layout = opening_layout(&rrd);
+    assert_eq!(layout.timeline.as_deref(), Some("frame"));
+    assert!(
+        layout
+            .view_list()
+            .contains(&("TimeSeries".to_string(), format!("/{}", paths::TRACKING))),
+        "{:?}",
+        layout.view_list()
+    );
     assert_eq!(
         c.get(paths::TRAJECTORIES, "LineStrips2D:strips").total(),
         table.n_tracks()
@@ -1246,7 +1524,10 @@ fn reconstruct_recorded_projective_stages() {
     );
     for st in &p.stages {
         // One cost scalar per accepted step plus the start.
-        let cost = c.get(&format!("solver/{}/run0/cost", st.stage), "Scalars:scalars");
+        let cost = c.get(
+            &format!("{}/{}/run0", paths::SOLVER_COST, st.stage),
+            "Scalars:scalars",
+        );
         assert!(
             cost.total() >= 2,
             "{}: {} cost rows",
