@@ -1205,7 +1205,7 @@ const FOCAL_MODELS: [(&str, usize, bool); 6] = [
 ];
 
 impl ReferenceCamera {
-    /// The focal length in pixels for the models of [`FOCAL_MODELS`] (`(fx + fy) / 2` when
+    /// The focal length in pixels for the models of `FOCAL_MODELS` (`(fx + fy) / 2` when
     /// there are two, COLMAP's mean focal length); `None` for any other model.
     pub fn focal_px(&self) -> Option<f64> {
         let &(_, _, two) = FOCAL_MODELS.iter().find(|(m, _, _)| *m == self.model)?;

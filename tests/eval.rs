@@ -700,13 +700,13 @@ fn truth_as_colmap(d: &Path, to: &Path) {
         });
         let t = &fr["t"];
         let mut points2d = vec![([3.0, 4.0], None)];
-        for p in 0..table.n_tracks() {
+        for (p, point) in points.iter_mut().enumerate() {
             let Some([x, y]) = table.get(f, p) else {
                 continue;
             };
             let s = (f * 31 + p * 17) as f64;
             let jitter = [0.45 * s.sin(), 0.45 * (1.7 * s).cos()];
-            points[p].track.push((id, points2d.len()));
+            point.track.push((id, points2d.len()));
             points2d.push((
                 [x + 0.5 + jitter[0], y + 0.5 + jitter[1]],
                 Some(point_id(p)),
