@@ -57,7 +57,7 @@ impl rank3::Observer for Printer {
             ..
         } = e
         {
-            eprintln!("{solver} {iteration} rms {rms:.6} lambda {lambda:.3e}");
+            eprintln!("{solver} {iteration} rms {rms:.9} lambda {lambda:.3e}");
         }
     }
 }
@@ -66,7 +66,9 @@ impl rank3::Observer for Printer {
 /// adjustment (to measure the cost per iteration on long sequences) and `--affine-windows`
 /// chaining affine windows (`WindowConfig::projective = false`) instead of projective ones.
 /// `JOINT=1` in the environment uses the joint (damped points, no re-solve) bundle
-/// adjustment instead of variable projection, `DIRECT=1` skips pOSE (experiments).
+/// adjustment instead of variable projection, `DIRECT=1` skips pOSE, `GEO=α` sets the
+/// geodesic acceleration, `NOISE_TOL=τ` the noise-level stop (0: off), and `METRIC_START=1`
+/// starts the adjustment from the metric chain's cameras (experiments).
 fn config(max_iterations: Option<usize>) -> ProjectiveConfig {
     let mut c = ProjectiveConfig::default();
     if let Some(m) = max_iterations {
@@ -75,6 +77,12 @@ fn config(max_iterations: Option<usize>) -> ProjectiveConfig {
     if std::env::var_os("JOINT").is_some() {
         c.refine.damp_points = true;
         c.refine.resolve_points = false;
+    }
+    if let Some(a) = std::env::var("GEO").ok().and_then(|v| v.parse().ok()) {
+        c.refine.geodesic_acceleration = a;
+    }
+    if let Some(a) = std::env::var("NOISE_TOL").ok().and_then(|v| v.parse().ok()) {
+        c.refine.noise_tolerance = a;
     }
     if std::env::var_os("DIRECT").is_some() {
         c.bridge = rank3::projective::Bridge::Direct;
