@@ -356,10 +356,19 @@ fn a_sparse_sequence_is_refined_from_a_given_model() {
         rms_start > 0.1,
         "the perturbed start fits too well: {rms_start}"
     );
-    let r =
-        refine_observations(&obs, 30, n_tracks, &start, &cfg, &mut rank3::NoopObserver).unwrap();
-    assert_eq!(r.start, Start::Given);
-    assert!(r.rms_px < 1e-9, "RMS {} from {rms_start}", r.rms_px);
+    // With and without the geodesic acceleration of the adjustment.
+    for geodesic_acceleration in [0.0, 0.75] {
+        let mut c = cfg.clone();
+        c.refine.geodesic_acceleration = geodesic_acceleration;
+        let r =
+            refine_observations(&obs, 30, n_tracks, &start, &c, &mut rank3::NoopObserver).unwrap();
+        assert_eq!(r.start, Start::Given);
+        assert!(
+            r.rms_px < 1e-9,
+            "α = {geodesic_acceleration}: RMS {} from {rms_start}",
+            r.rms_px
+        );
+    }
     // A start of the wrong size is a typed error.
     let mut short = start.clone();
     short.points.pop();
