@@ -377,3 +377,13 @@ pub fn remove_stale(dir: &Path, keep: &[&str]) -> Result<()> {
     }
     Ok(())
 }
+
+/// An enum value as the JSON outputs spell it (`least-squares`, `converged`, …), so that the
+/// log and reconstruction.json use one spelling.
+pub fn spelled<T: serde::Serialize>(v: &T) -> String {
+    match serde_json::to_value(v) {
+        Ok(serde_json::Value::String(s)) => s,
+        Ok(other) => other.to_string(),
+        Err(_) => "?".into(),
+    }
+}

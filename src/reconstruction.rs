@@ -1795,18 +1795,19 @@ fn fit_selection(
         && c.status != SolverStatus::Converged
     {
         warnings.push(format!(
-            "missing-data completion ended with status {:?} after {} iterations",
-            c.status, c.iterations
+            "missing-data completion ended with status {} after {} iterations",
+            crate::output::spelled(&c.status),
+            c.iterations
         ));
     }
     if let Some(c) = &completion_report
         && c.solver != config.completion.solver
     {
         warnings.push(format!(
-            "missing-data completion: {:?} ran instead of {:?}: the latter's dense matrix for \
+            "missing-data completion: {} ran instead of {}: the latter's dense matrix for \
              {} frames is over the memory budget (crate::budget)",
-            c.solver,
-            config.completion.solver,
+            crate::output::spelled(&c.solver),
+            crate::output::spelled(&config.completion.solver),
             meas.n_frames()
         ));
     }
@@ -1972,8 +1973,10 @@ fn fit_selection(
                 && !config.camera.is_perspective()
             {
                 warnings.push(format!(
-                    "projective stage {} ended with status {:?} after {} iterations",
-                    st.stage, st.status, st.iterations
+                    "projective stage {} ended with status {} after {} iterations",
+                    st.stage,
+                    crate::output::spelled(&st.status),
+                    st.iterations
                 ));
             }
         }
@@ -2275,8 +2278,8 @@ fn factorization_from_completion(meas: &Measurements, c: completion::Completion)
         return Err(Error::InvalidConfig {
             field: "completion.model",
             message: format!(
-                "the metric upgrade needs the affine model (rank 3 + translation), got {:?}",
-                c.model
+                "the metric upgrade needs the affine model (rank 3 + translation), got {}",
+                crate::output::spelled(&c.model)
             ),
         });
     }
@@ -2571,8 +2574,9 @@ fn sparse_reconstruction(
     }
     if fit.report.status != SolverStatus::Converged {
         warnings.push(format!(
-            "sparse bundle adjustment ended with status {:?} after {} iterations",
-            fit.report.status, fit.report.iterations
+            "sparse bundle adjustment ended with status {} after {} iterations",
+            crate::output::spelled(&fit.report.status),
+            fit.report.iterations
         ));
     }
     let mut all = prob.metric_model(&fit.cams, &fit.pts);
@@ -2630,8 +2634,9 @@ fn sparse_reconstruction(
         let result = per.map(|pf| {
             if pf.report.status != SolverStatus::Converged {
                 warnings.push(format!(
-                    "perspective bundle adjustment ended with status {:?} after {} iterations",
-                    pf.report.status, pf.report.iterations
+                    "perspective bundle adjustment ended with status {} after {} iterations",
+                    crate::output::spelled(&pf.report.status),
+                    pf.report.iterations
                 ));
             }
             if pf.in_front < 0.95 {

@@ -951,9 +951,9 @@ pub fn fit(
     let mut note = None;
     if n_out > 0 && lm.report.status != crate::SolverStatus::Converged {
         note = Some(format!(
-            "no outlier rejection: the adjustment ended with status {:?} ({n_out} track(s) \
+            "no outlier rejection: the adjustment ended with status {} ({n_out} track(s) \
              over {threshold:.2} px would have been rejected)",
-            lm.report.status
+            crate::output::spelled(&lm.report.status)
         ));
     } else if n_out > 0 && (0..sub.n_frames()).any(|f| sub.frame_len(f) < 4) {
         note = Some(format!(

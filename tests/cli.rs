@@ -998,7 +998,7 @@ fn oversized_inputs_are_refused_or_degrade_gracefully() {
             .arg(&out)
             .args(["--camera", "orthographic"]),
     );
-    assert!(log.contains("Als ran instead of Wiberg"), "{log}");
+    assert!(log.contains("als ran instead of wiberg"), "{log}");
     assert!(log.contains("refinement was skipped"), "{log}");
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("reconstruction.json")).unwrap())

@@ -177,7 +177,7 @@ impl ReconstructOpts {
     /// With `-v`: the settings in force, one line.
     pub fn print_settings(&self, camera: CameraArg, config: &Config) {
         detail!(
-            "settings: camera {}, robust pass {}, missing-data solver {:?} ({:?} start, {} \
+            "settings: camera {}, robust pass {}, missing-data solver {} ({} start, {} \
              run(s)), metric upgrade {}, refinement {}, seed {}{}",
             camera.name(),
             match (&config.robust, self.threshold) {
@@ -185,8 +185,8 @@ impl ReconstructOpts {
                 (Some(_), Some(px)) => format!("on (threshold {px} px)"),
                 (Some(_), None) => "on (threshold from the data)".to_string(),
             },
-            config.completion.solver,
-            config.completion.init,
+            rank3::output::spelled(&config.completion.solver),
+            rank3::output::spelled(&config.completion.init),
             config.completion.runs,
             if self.force_sdp {
                 "by SDP"
@@ -364,10 +364,10 @@ pub fn reconstruct_objects(
         match &o.reconstruction {
             Ok(r) => {
                 info!(
-                    "object {}: {} tracks, camera {:?}, RMS {:.3} px -> {}",
+                    "object {}: {} tracks, camera {}, RMS {:.3} px -> {}",
                     o.index,
                     o.tracks.len(),
-                    r.camera_model,
+                    rank3::output::spelled(&r.camera_model),
                     r.rms_px,
                     out.join(rank3::objects::object_dir(o.index)).display()
                 );

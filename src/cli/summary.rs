@@ -1,6 +1,7 @@
 //! What a reconstruction prints: the summary on stderr (more of it with `-v`), then its
 //! one-line result on stdout.
 
+use rank3::output::spelled;
 use std::path::Path;
 
 use rank3::Reconstruction;
@@ -61,7 +62,7 @@ pub fn print_report(rec: &Reconstruction) {
         n.min(SET_ASIDE_LINES)
     };
     for s in &rec.set_aside[..listed] {
-        info!("set aside {:?} {}: {}", s.kind, s.id, s.reason);
+        info!("set aside {} {}: {}", spelled(&s.kind), s.id, s.reason);
     }
     if listed < n {
         info!(
@@ -87,13 +88,13 @@ pub fn print_report(rec: &Reconstruction) {
     if let Some(s) = &rec.sparse {
         detail!(
             "sparse pipeline: {}; {} observations, {} round(s), {} window(s) skipped, \
-             affine RMS {:.6} px, {:?} after {} iterations, {} Schur non-zeros, {:.2} s",
+             affine RMS {:.6} px, {} after {} iterations, {} Schur non-zeros, {:.2} s",
             s.reason,
             s.observations,
             s.rounds,
             s.skipped_windows,
             s.rms_px,
-            s.status,
+            spelled(&s.status),
             s.iterations,
             s.schur_nonzeros,
             s.seconds
@@ -158,19 +159,21 @@ pub fn print_report(rec: &Reconstruction) {
     }
     if let Some(c) = &rec.completion {
         info!(
-            "completion: {} ({:?} model) affine RMS {:.6} px, {:?} after {} iterations, {:.2} s",
+            "completion: {} ({} model) affine RMS {:.6} px, {} after {} iterations, {:.2} s",
             c.solver.name(),
-            c.model,
+            spelled(&c.model),
             c.rms_px,
-            c.status,
+            spelled(&c.status),
             c.iterations,
             c.seconds
         );
         detail!("completion: {} run(s), the best kept", c.runs);
     }
     info!(
-        "affine fit RMS {:.6} px; metric upgrade by {:?} (least-squares L min eigenvalue {:.3e})",
-        rec.factorization.rms_px, rec.metric_upgrade.method, rec.metric_upgrade.min_eigenvalue_ls
+        "affine fit RMS {:.6} px; metric upgrade by {} (least-squares L min eigenvalue {:.3e})",
+        rec.factorization.rms_px,
+        spelled(&rec.metric_upgrade.method),
+        rec.metric_upgrade.min_eigenvalue_ls
     );
     let m = &rec.metric_upgrade;
     detail!(
@@ -200,8 +203,12 @@ pub fn print_report(rec: &Reconstruction) {
         info!("refinement: skipped: {why}");
     } else if let Some(r) = &rec.refinement {
         info!(
-            "refinement: RMS {:.6} → {:.6} px ({:?}, {} iterations, {:.3} s)",
-            r.rms_before_px, r.rms_after_px, r.status, r.iterations, r.seconds
+            "refinement: RMS {:.6} → {:.6} px ({}, {} iterations, {:.3} s)",
+            r.rms_before_px,
+            r.rms_after_px,
+            spelled(&r.status),
+            r.iterations,
+            r.seconds
         );
     }
     if let Some(j) = rec.robust.as_ref().and_then(|r| r.projective.as_ref()) {
@@ -219,15 +226,20 @@ pub fn print_report(rec: &Reconstruction) {
     }
     if let Some(p) = &rec.projective {
         detail!(
-            "projective: started from {:?}, {} non-zeros in the reduced camera system, RMS {:.6} px",
-            p.start,
+            "projective: started from {}, {} non-zeros in the reduced camera system, RMS {:.6} px",
+            spelled(&p.start),
             p.schur_nnz,
             p.rms_px
         );
         for s in &p.stages {
             info!(
-                "projective {}: RMS {:.6} → {:.6} px ({:?}, {} iterations, {:.3} s)",
-                s.stage, s.rms_before_px, s.rms_after_px, s.status, s.iterations, s.seconds
+                "projective {}: RMS {:.6} → {:.6} px ({}, {} iterations, {:.3} s)",
+                s.stage,
+                s.rms_before_px,
+                s.rms_after_px,
+                spelled(&s.status),
+                s.iterations,
+                s.seconds
             );
         }
     }
@@ -269,8 +281,13 @@ pub fn print_report(rec: &Reconstruction) {
         );
         for s in &p.stages {
             info!(
-                "perspective {}: RMS {:.6} → {:.6} px ({:?}, {} iterations, {:.3} s)",
-                s.stage, s.rms_before_px, s.rms_after_px, s.status, s.iterations, s.seconds
+                "perspective {}: RMS {:.6} → {:.6} px ({}, {} iterations, {:.3} s)",
+                s.stage,
+                s.rms_before_px,
+                s.rms_after_px,
+                spelled(&s.status),
+                s.iterations,
+                s.seconds
             );
         }
         let k = &p.intrinsics;

@@ -102,11 +102,11 @@ pub fn log_objects(
                 )?;
                 log_cameras(rec, &format!("{base}/cameras"), &r.model, &r.kept_frames)?;
                 md.push_str(&format!(
-                    "| {} | {} | {:.3} | {:?} | {:.3} |\n",
+                    "| {} | {} | {:.3} | {} | {:.3} |\n",
                     o.index,
                     o.tracks.len(),
                     o.subspace_rms_px,
-                    r.camera_model,
+                    crate::output::spelled(&r.camera_model),
                     r.rms_px
                 ));
             }

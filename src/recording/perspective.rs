@@ -195,9 +195,9 @@ pub(super) fn perspective_markdown(p: &crate::reconstruction::PerspectiveResult)
 /// Markdown table of the projective stages.
 pub(super) fn projective_markdown(p: &crate::reconstruction::ProjectiveResult) -> String {
     format!(
-        "# Projective reconstruction\n\nstart: {:?}; final RMS {:.6} px; reduced camera system \
+        "# Projective reconstruction\n\nstart: {}; final RMS {:.6} px; reduced camera system \
          {} non-zeros\n\n{}",
-        p.start,
+        crate::output::spelled(&p.start),
         p.rms_px,
         p.schur_nnz,
         stages_table(&p.stages)
@@ -212,8 +212,13 @@ pub(super) fn stages_table(stages: &[crate::projective::StageReport]) -> String 
     );
     for st in stages {
         s.push_str(&format!(
-            "| {} | {:?} | {} | {:.6} | {:.6} | {:.3} |\n",
-            st.stage, st.status, st.iterations, st.rms_before_px, st.rms_after_px, st.seconds
+            "| {} | {} | {} | {:.6} | {:.6} | {:.3} |\n",
+            st.stage,
+            crate::output::spelled(&st.status),
+            st.iterations,
+            st.rms_before_px,
+            st.rms_after_px,
+            st.seconds
         ));
     }
     s

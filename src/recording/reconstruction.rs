@@ -552,7 +552,7 @@ pub fn summary_markdown(r: &Reconstruction) -> String {
     ));
     s.push_str("\n## Choices\n\n");
     s.push_str(&format!(
-        "* camera model: {}\n* factorization: {} (SVD: {}{})\n* metric upgrade: {:?}\n\
+        "* camera model: {}\n* factorization: {} (SVD: {}{})\n* metric upgrade: {}\n\
          * refinement: {}\n* depth-reversal convention mirrored the solution: {}\n",
         r.camera_model,
         r.factorization.method,
@@ -561,14 +561,17 @@ pub fn summary_markdown(r: &Reconstruction) -> String {
             .svd_fallback_reason
             .as_deref()
             .map_or(String::new(), |why| format!(", fallback: {why}")),
-        r.metric_upgrade.method,
+        crate::output::spelled(&r.metric_upgrade.method),
         match &r.refinement {
             Some(f) if f.skipped.is_some() => {
                 format!("skipped ({})", f.skipped.as_deref().unwrap_or(""))
             }
             Some(f) => format!(
-                "RMS {:.6} → {:.6} px ({:?}, {} iterations)",
-                f.rms_before_px, f.rms_after_px, f.status, f.iterations
+                "RMS {:.6} → {:.6} px ({}, {} iterations)",
+                f.rms_before_px,
+                f.rms_after_px,
+                crate::output::spelled(&f.status),
+                f.iterations
             ),
             None => "off".into(),
         },
@@ -590,14 +593,19 @@ pub fn summary_markdown(r: &Reconstruction) -> String {
     ));
     if let Some(p) = &r.projective {
         s.push_str(&format!(
-            "* camera model: projective (start {:?}); metric (scaled-orthographic) model RMS \
+            "* camera model: projective (start {}); metric (scaled-orthographic) model RMS \
              {:.6} px\n",
-            p.start, r.metric_rms_px
+            crate::output::spelled(&p.start),
+            r.metric_rms_px
         ));
         for st in &p.stages {
             s.push_str(&format!(
-                "* projective {}: RMS {:.6} → {:.6} px ({:?}, {} iterations)\n",
-                st.stage, st.rms_before_px, st.rms_after_px, st.status, st.iterations
+                "* projective {}: RMS {:.6} → {:.6} px ({}, {} iterations)\n",
+                st.stage,
+                st.rms_before_px,
+                st.rms_after_px,
+                crate::output::spelled(&st.status),
+                st.iterations
             ));
         }
     }
