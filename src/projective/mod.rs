@@ -823,18 +823,7 @@ pub fn refine(
     }
     let norm = Normalization::of(meas);
     let g = graph(meas, &norm);
-    let mut cams = Vec::with_capacity(12 * meas.n_frames());
-    for c in &start.cameras {
-        let mut n = norm.camera_to_normalized(c);
-        bundle::normalize(&mut n);
-        cams.extend(n);
-    }
-    let mut pts = Vec::with_capacity(4 * meas.n_points());
-    for x in &start.points {
-        let mut v = *x;
-        bundle::normalize(&mut v);
-        pts.extend_from_slice(&v);
-    }
+    let (cams, pts) = normalized_start(start, &norm);
     bundle_adjust(
         &g,
         &norm,
@@ -888,18 +877,7 @@ pub fn refine_observations(
     let g = observation_graph(obs, &order, n_frames, n_tracks, &norm);
     drop(order);
     check_graph(&g)?;
-    let mut cams = Vec::with_capacity(12 * n_frames);
-    for c in &start.cameras {
-        let mut n = norm.camera_to_normalized(c);
-        bundle::normalize(&mut n);
-        cams.extend(n);
-    }
-    let mut pts = Vec::with_capacity(4 * n_tracks);
-    for x in &start.points {
-        let mut v = *x;
-        bundle::normalize(&mut v);
-        pts.extend_from_slice(&v);
-    }
+    let (cams, pts) = normalized_start(start, &norm);
     bundle_adjust(
         &g,
         &norm,
@@ -911,6 +889,24 @@ pub fn refine_observations(
         0,
         observer,
     )
+}
+
+/// A pixel-coordinate model in `norm`'s coordinates, cameras (12 each) and points (4 each)
+/// on their unit spheres: the start of [`refine`] and [`refine_observations`].
+fn normalized_start(start: &ProjectiveModel, norm: &Normalization) -> (Vec<f64>, Vec<f64>) {
+    let mut cams = Vec::with_capacity(12 * start.cameras.len());
+    for c in &start.cameras {
+        let mut n = norm.camera_to_normalized(c);
+        bundle::normalize(&mut n);
+        cams.extend(n);
+    }
+    let mut pts = Vec::with_capacity(4 * start.points.len());
+    for x in &start.points {
+        let mut v = *x;
+        bundle::normalize(&mut v);
+        pts.extend_from_slice(&v);
+    }
+    (cams, pts)
 }
 
 /// The projective bundle adjustment stage shared by [`fit`] and [`refine`]: cameras and
