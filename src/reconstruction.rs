@@ -384,6 +384,93 @@ impl ProjectiveResult {
     }
 }
 
+impl ProjectiveResult {
+    /// The result of [`projective::fit_observations`] on the inlier tracks `inl` of `kept`
+    /// (renumbered `0..inl.len()`, every frame of `kept`), with the outlier tracks `out`
+    /// triangulated from the fitted cameras; points in `kept`'s track order. Residuals from
+    /// `kept`'s rows: `O(observations)`.
+    fn from_sparse(
+        pf: projective::ProjectiveFit,
+        kept: &TrackTable,
+        inl: &[usize],
+        out: &[usize],
+    ) -> Self {
+        let model = pf.model;
+        let nf = model.cameras.len();
+        let mut slot = vec![(usize::MAX, usize::MAX); kept.n_tracks()];
+        for (j, &p) in inl.iter().enumerate() {
+            slot[p].0 = j;
+        }
+        for (k, &p) in out.iter().enumerate() {
+            slot[p].1 = k;
+        }
+        let outlier_obs = observations_of(kept, out);
+        let outlier_points = ProjectiveModel {
+            cameras: model.cameras.clone(),
+            points: Vec::new(),
+        }
+        .triangulate_observations(&outlier_obs, out.len())
+        .unwrap_or_else(|_| vec![[f64::NAN; 4]; out.len()]);
+        drop(outlier_obs);
+        let mut frame_ss = vec![(0.0, 0usize); nf];
+        let mut track_ss = vec![(0.0, 0usize); kept.n_tracks()];
+        for (f, fs) in frame_ss.iter_mut().enumerate() {
+            for e in kept.frame_row(f).entries() {
+                let p = e.track as usize;
+                let (j, k) = slot[p];
+                let q = if j != usize::MAX {
+                    model.project(f, j)
+                } else {
+                    projective::project(&model.cameras[f], &outlier_points[k])
+                };
+                let d2 = (q[0] - e.x).powi(2) + (q[1] - e.y).powi(2);
+                if d2.is_finite() {
+                    track_ss[p].0 += d2;
+                    track_ss[p].1 += 1;
+                    if j != usize::MAX {
+                        fs.0 += d2;
+                        fs.1 += 1;
+                    }
+                }
+            }
+        }
+        let cameras = (0..nf)
+            .map(|f| ProjectiveFrame {
+                frame: kept.frame_ids()[f].clone(),
+                p: model.camera_matrix(f),
+                rms_px: rms_of(frame_ss[f].0, frame_ss[f].1),
+                n_observations: frame_ss[f].1,
+            })
+            .collect();
+        let points = (0..kept.n_tracks())
+            .map(|p| {
+                let (j, k) = slot[p];
+                ProjectivePoint {
+                    track: kept.track_ids()[p].clone(),
+                    x: if j != usize::MAX {
+                        model.points[j]
+                    } else {
+                        outlier_points[k]
+                    },
+                    inlier: j != usize::MAX,
+                    rms_px: rms_of(track_ss[p].0, track_ss[p].1),
+                    n_observations: track_ss[p].1,
+                }
+            })
+            .collect();
+        Self {
+            rms_px: pf.rms_px,
+            start: pf.start,
+            stages: pf.stages,
+            cameras,
+            points,
+            schur_nnz: pf.schur_nnz,
+            model,
+            outlier_points,
+        }
+    }
+}
+
 /// One frame's metric perspective camera: `x_cam = R X + t`, `w = π(K x_cam)`.
 #[derive(Debug, Clone, Serialize)]
 pub struct PerspectiveFrame {
@@ -2514,17 +2601,13 @@ fn sparse_reason(kept: &TrackTable, config: &Config) -> Result<Option<String>> {
         ))),
         // A long table whose tracks are short (a video): the dense pipeline's RANSAC pass
         // needs tracks that span the sequence and finds no rigid majority, and its affine
-        // completion drifts (docs/math.md §13). The projective camera exists only in the
-        // dense pipeline; the perspective camera asked for keeps the dense pipeline while
-        // the table fits it (its sparse path, which `auto` tries, chains windows and can
-        // fail where the dense one does not).
+        // completion drifts (docs/math.md §13). The perspective camera asked for keeps the
+        // dense pipeline while the table fits it (its sparse path, which `auto` tries,
+        // chains windows and can fail where the dense one does not).
         Pipeline::Auto
             if f >= BANDED_MIN_FRAMES
                 && kept.fill() < BANDED_MAX_FILL
-                && !matches!(
-                    config.camera,
-                    CameraModel::Projective | CameraModel::Perspective
-                ) =>
+                && config.camera != CameraModel::Perspective =>
         {
             Ok(Some(format!(
                 "a long sequence of short tracks ({f} frames, {:.1} % filled): the dense \
@@ -2562,7 +2645,7 @@ fn sparse_reconstruction(
     } = kept;
     let mut warnings = vec![format!(
         "sparse pipeline: {reason}; the dense-only stages (RANSAC robust pass, σ4/σ3, metric \
-         refinement, the projective camera, completed.txt) do not run"
+         refinement, completed.txt) do not run"
     )];
     let affine_camera = config.camera.affine();
     let t0 = Instant::now();
@@ -2661,6 +2744,39 @@ fn sparse_reconstruction(
             perspective = result;
         }
     }
+    // The projective camera on the sparse path (projective::fit_observations: projective
+    // windows chained by homographies, then the sparse projective bundle adjustment), on
+    // the tracks the scaled orthographic fit kept.
+    let mut projective = None;
+    if config.camera == CameraModel::Projective {
+        let obs = observations_of(kept, &inl);
+        let windows = crate::projective::windowed::WindowConfig {
+            projective: true,
+            ..config.sparse.window.clone()
+        };
+        let pf = timer.run("projective", |o| {
+            projective::fit_observations(&obs, nf, inl.len(), &config.projective, &windows, o)
+        });
+        drop(obs);
+        match pf {
+            Ok(pf) => {
+                if pf.report.status != SolverStatus::Converged {
+                    warnings.push(format!(
+                        "projective bundle adjustment ended with status {} after {} iterations",
+                        crate::output::spelled(&pf.report.status),
+                        pf.report.iterations
+                    ));
+                }
+                camera_model = CameraModel::Projective;
+                projective = Some(ProjectiveResult::from_sparse(pf, kept, &inl, &out));
+            }
+            // Nothing is lost when it fails: the scaled orthographic result stands.
+            Err(e) => warnings.push(format!(
+                "the projective camera could not be fitted on the sparse path ({e}); the \
+                 scaled orthographic camera is kept"
+            )),
+        }
+    }
     let frames: Vec<FrameResult> = (0..nf)
         .map(|f| {
             let r = all.rotations[f].matrix();
@@ -2734,7 +2850,11 @@ fn sparse_reconstruction(
         model_selection,
         frames,
         points,
-        rms_px: perspective.as_ref().map_or(metric_rms_px, |p| p.rms_px),
+        rms_px: match (&perspective, &projective) {
+            (Some(p), _) => p.rms_px,
+            (None, Some(p)) => p.rms_px,
+            _ => metric_rms_px,
+        },
         metric_rms_px,
         metric_upgrade: upgrade,
         singular_values: Vec::new(),
@@ -2749,7 +2869,7 @@ fn sparse_reconstruction(
         completion: None,
         robust,
         refinement: None,
-        projective: None,
+        projective,
         perspective,
         input: InputSummary {
             frames: table.n_frames(),

@@ -140,3 +140,47 @@ fn long_perspective_video_runs_the_sparse_perspective_path() {
     assert_eq!(p.cameras.len(), 130);
     assert!(r.model_selection.is_some());
 }
+
+/// The projective camera on a long video-like table (130 frames, short tracks): the sparse
+/// pipeline runs `projective::fit_observations` on the tracks the scaled orthographic fit
+/// kept, and its reconstruction is the result: RMS at the noise level (0.5 px), every frame
+/// with its `P_f`, reprojections of the homogeneous points matching the tracks.
+#[test]
+fn long_video_with_the_projective_camera_runs_the_sparse_projective_path() {
+    let (obs, truth) = rank3::synth::perspective_corridor(130, 40, 0.5, 5);
+    let rows: Vec<(u32, u32, f64, f64)> = obs
+        .iter()
+        .map(|o| (o.frame as u32, o.track as u32, o.xy[0], o.xy[1]))
+        .collect();
+    let table = rank3::TrackTable::from_observations(
+        (0..130).map(rank3::table::Id::Int).collect(),
+        (0..truth.len() as i64).map(rank3::table::Id::Int).collect(),
+        &rows,
+    )
+    .unwrap();
+    let config = Config {
+        camera: CameraModel::Projective,
+        ..Config::default()
+    };
+    let r = Reconstruction::from_tracks(&table, &config).unwrap();
+    assert!(
+        r.sparse.is_some(),
+        "the sparse pipeline runs: {:?}",
+        r.warnings
+    );
+    assert_eq!(r.camera_model, CameraModel::Projective, "{:?}", r.warnings);
+    let p = r.projective.as_ref().expect("a projective result");
+    // 0.5 px noise per coordinate: the projective fit's RMS sits just under it.
+    assert!(p.rms_px > 0.4 && p.rms_px < 0.5, "RMS {} px", p.rms_px);
+    assert_eq!(r.rms_px, p.rms_px);
+    assert_eq!(p.cameras.len(), 130);
+    assert_eq!(p.points.len(), table.n_tracks());
+    // Every inlier track's reprojection RMS is at the noise level.
+    let worst = p
+        .points
+        .iter()
+        .filter(|q| q.inlier)
+        .map(|q| q.rms_px)
+        .fold(0.0, f64::max);
+    assert!(worst < 2.5, "worst track RMS {worst} px");
+}

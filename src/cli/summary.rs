@@ -232,6 +232,14 @@ pub fn print_report(rec: &Reconstruction) {
             p.rms_px
         );
         for s in &p.stages {
+            if s.rms_after_px.is_nan() {
+                // The windows of a long sequence: no RMS of their own.
+                info!(
+                    "projective {}: {} windows fitted and chained, {:.3} s",
+                    s.stage, s.iterations, s.seconds
+                );
+                continue;
+            }
             info!(
                 "projective {}: RMS {:.6} → {:.6} px ({}, {} iterations, {:.3} s)",
                 s.stage,
