@@ -412,28 +412,13 @@ impl ProjectiveResult {
         .triangulate_observations(&outlier_obs, out.len())
         .unwrap_or_else(|_| vec![[f64::NAN; 4]; out.len()]);
         drop(outlier_obs);
-        let mut frame_ss = vec![(0.0, 0usize); nf];
-        let mut track_ss = vec![(0.0, 0usize); kept.n_tracks()];
-        for (f, fs) in frame_ss.iter_mut().enumerate() {
-            for e in kept.frame_row(f).entries() {
-                let p = e.track as usize;
-                let (j, k) = slot[p];
-                let q = if j != usize::MAX {
-                    model.project(f, j)
-                } else {
-                    projective::project(&model.cameras[f], &outlier_points[k])
-                };
-                let d2 = (q[0] - e.x).powi(2) + (q[1] - e.y).powi(2);
-                if d2.is_finite() {
-                    track_ss[p].0 += d2;
-                    track_ss[p].1 += 1;
-                    if j != usize::MAX {
-                        fs.0 += d2;
-                        fs.1 += 1;
-                    }
-                }
+        let (frame_ss, track_ss) = sparse_residuals(kept, &slot, nf, |f, j, k| {
+            if j != usize::MAX {
+                model.project(f, j)
+            } else {
+                projective::project(&model.cameras[f], &outlier_points[k])
             }
-        }
+        });
         let cameras = (0..nf)
             .map(|f| ProjectiveFrame {
                 frame: kept.frame_ids()[f].clone(),
@@ -684,28 +669,13 @@ impl PerspectiveResult {
         .map(|x| Vector3::new(x[0] / x[3], x[1] / x[3], x[2] / x[3]))
         .collect();
         drop(outlier_obs);
-        let mut frame_ss = vec![(0.0, 0usize); nf];
-        let mut track_ss = vec![(0.0, 0usize); kept.n_tracks()];
-        for (f, fs) in frame_ss.iter_mut().enumerate() {
-            for e in kept.frame_row(f).entries() {
-                let p = e.track as usize;
-                let (j, k) = slot[p];
-                let q = if j != usize::MAX {
-                    model.project(f, j)
-                } else {
-                    model.project_point(f, &outlier_points[k])
-                };
-                let d2 = (q[0] - e.x).powi(2) + (q[1] - e.y).powi(2);
-                if d2.is_finite() {
-                    track_ss[p].0 += d2;
-                    track_ss[p].1 += 1;
-                    if j != usize::MAX {
-                        fs.0 += d2;
-                        fs.1 += 1;
-                    }
-                }
+        let (frame_ss, track_ss) = sparse_residuals(kept, &slot, nf, |f, j, k| {
+            if j != usize::MAX {
+                model.project(f, j)
+            } else {
+                model.project_point(f, &outlier_points[k])
             }
-        }
+        });
         let cameras = (0..nf)
             .map(|f| Self::frame(model, f, kept.frame_ids()[f].clone(), frame_ss[f]))
             .collect();
@@ -738,6 +708,38 @@ impl PerspectiveResult {
             .collect();
         Self::assemble(pf, cfg, cameras, points, downweighted, outlier_points)
     }
+}
+
+/// Squared reprojection errors of a sparse fit, summed per frame over the fitted tracks and
+/// per track over all its observations: `(Σ d², count)` each. `slot[p]` is the kept track's
+/// (inlier index, outlier index), `usize::MAX` where it has none; `project(f, j, k)` predicts
+/// it in frame `f`. `O(observations)`.
+#[allow(clippy::type_complexity)]
+fn sparse_residuals(
+    kept: &TrackTable,
+    slot: &[(usize, usize)],
+    nf: usize,
+    project: impl Fn(usize, usize, usize) -> [f64; 2],
+) -> (Vec<(f64, usize)>, Vec<(f64, usize)>) {
+    let mut frame_ss = vec![(0.0, 0usize); nf];
+    let mut track_ss = vec![(0.0, 0usize); kept.n_tracks()];
+    for (f, fs) in frame_ss.iter_mut().enumerate() {
+        for e in kept.frame_row(f).entries() {
+            let p = e.track as usize;
+            let (j, k) = slot[p];
+            let q = project(f, j, k);
+            let d2 = (q[0] - e.x).powi(2) + (q[1] - e.y).powi(2);
+            if d2.is_finite() {
+                track_ss[p].0 += d2;
+                track_ss[p].1 += 1;
+                if j != usize::MAX {
+                    fs.0 += d2;
+                    fs.1 += 1;
+                }
+            }
+        }
+    }
+    (frame_ss, track_ss)
 }
 
 /// The observations of `kept`'s tracks `tracks` as a list for the sparse solvers, track
