@@ -810,31 +810,10 @@ pub fn refine(
 ) -> Result<ProjectiveFit> {
     cfg.validate()?;
     check_observations(meas)?;
-    if start.cameras.len() != meas.n_frames() || start.points.len() != meas.n_points() {
-        return Err(Error::Dimension {
-            context: "projective refine: start model",
-            expected: format!("{} cameras, {} points", meas.n_frames(), meas.n_points()),
-            got: format!(
-                "{} cameras, {} points",
-                start.cameras.len(),
-                start.points.len()
-            ),
-        });
-    }
+    check_start_size(start, meas.n_frames(), meas.n_points())?;
     let norm = Normalization::of(meas);
     let g = graph(meas, &norm);
-    let (cams, pts) = normalized_start(start, &norm);
-    bundle_adjust(
-        &g,
-        &norm,
-        cams,
-        pts,
-        Start::Given,
-        Vec::new(),
-        cfg,
-        run,
-        observer,
-    )
+    adjust_from(&g, &norm, start, cfg, run, observer)
 }
 
 /// [`refine`] for a sparse table of observations (`n_frames` frames, `n_tracks` tracks): the
@@ -854,17 +833,7 @@ pub fn refine_observations(
     observer: &mut dyn Observer,
 ) -> Result<ProjectiveFit> {
     cfg.validate()?;
-    if start.cameras.len() != n_frames || start.points.len() != n_tracks {
-        return Err(Error::Dimension {
-            context: "projective refine: start model",
-            expected: format!("{n_frames} cameras, {n_tracks} points"),
-            got: format!(
-                "{} cameras, {} points",
-                start.cameras.len(),
-                start.points.len()
-            ),
-        });
-    }
+    check_start_size(start, n_frames, n_tracks)?;
     if start.cameras.iter().flatten().any(|v| !v.is_finite())
         || start.points.iter().flatten().any(|v| !v.is_finite())
     {
@@ -877,22 +846,52 @@ pub fn refine_observations(
     let g = observation_graph(obs, &order, n_frames, n_tracks, &norm);
     drop(order);
     check_graph(&g)?;
-    let (cams, pts) = normalized_start(start, &norm);
+    adjust_from(&g, &norm, start, cfg, 0, observer)
+}
+
+/// [`Error::Dimension`] unless `start` has `n_frames` cameras and `n_tracks` points: the
+/// start check of [`refine`] and [`refine_observations`].
+fn check_start_size(start: &ProjectiveModel, n_frames: usize, n_tracks: usize) -> Result<()> {
+    if start.cameras.len() != n_frames || start.points.len() != n_tracks {
+        return Err(Error::Dimension {
+            context: "projective refine: start model",
+            expected: format!("{n_frames} cameras, {n_tracks} points"),
+            got: format!(
+                "{} cameras, {} points",
+                start.cameras.len(),
+                start.points.len()
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The projective bundle adjustment of the graph `g` (normalized by `norm`) from a given
+/// pixel-coordinate model: the common last step of [`refine`] and [`refine_observations`].
+fn adjust_from(
+    g: &Graph,
+    norm: &Normalization,
+    start: &ProjectiveModel,
+    cfg: &ProjectiveConfig,
+    run: usize,
+    observer: &mut dyn Observer,
+) -> Result<ProjectiveFit> {
+    let (cams, pts) = normalized_start(start, norm);
     bundle_adjust(
-        &g,
-        &norm,
+        g,
+        norm,
         cams,
         pts,
         Start::Given,
         Vec::new(),
         cfg,
-        0,
+        run,
         observer,
     )
 }
 
 /// A pixel-coordinate model in `norm`'s coordinates, cameras (12 each) and points (4 each)
-/// on their unit spheres: the start of [`refine`] and [`refine_observations`].
+/// on their unit spheres: the start of [`adjust_from`].
 fn normalized_start(start: &ProjectiveModel, norm: &Normalization) -> (Vec<f64>, Vec<f64>) {
     let mut cams = Vec::with_capacity(12 * start.cameras.len());
     for c in &start.cameras {
