@@ -742,6 +742,20 @@ fn sparse_residuals(
     (frame_ss, track_ss)
 }
 
+/// The result's RMS: the perspective camera's when it was chosen, else the projective
+/// camera's, else the metric (affine-camera) model's.
+fn result_rms(
+    perspective: Option<&PerspectiveResult>,
+    projective: Option<&ProjectiveResult>,
+    metric_rms_px: f64,
+) -> f64 {
+    match (perspective, projective) {
+        (Some(p), _) => p.rms_px,
+        (None, Some(p)) => p.rms_px,
+        _ => metric_rms_px,
+    }
+}
+
 /// The observations of `kept`'s tracks `tracks` as a list for the sparse solvers, track
 /// `tracks[j]` renumbered `j`, frames as in `kept`. `O(observations)`.
 fn observations_of(kept: &TrackTable, tracks: &[usize]) -> Vec<projective::Observation> {
@@ -1504,6 +1518,8 @@ impl OutlierTracks {
 
 /// The camera model of the result and its fits.
 struct CameraChoice {
+    /// RMS of the metric (affine-camera) model over the fit's observations, pixels.
+    metric_rms_px: f64,
     camera_model: CameraModel,
     model_selection: Option<ModelSelection>,
     perspective: Option<PerspectiveResult>,
@@ -1646,6 +1662,7 @@ fn camera_stage(
         )
     });
     Ok(CameraChoice {
+        metric_rms_px,
         camera_model,
         model_selection,
         perspective,
@@ -1690,6 +1707,7 @@ fn assemble(
         ..
     } = fitted;
     let CameraChoice {
+        metric_rms_px,
         camera_model,
         model_selection,
         perspective,
@@ -1698,7 +1716,6 @@ fn assemble(
     for w in &warnings {
         timer.observer.on_event(&Event::Warning { message: w });
     }
-    let metric_rms_px = model.rms(&meas);
     let affine_prediction = Mat::from_fn(affine.m_hat.nrows(), affine.s_hat.ncols(), |r, p| {
         let mut v = affine.t[r];
         for k in 0..affine.m_hat.ncols() {
@@ -1742,11 +1759,7 @@ fn assemble(
         model_selection,
         frames,
         points,
-        rms_px: match (&perspective, &projective) {
-            (Some(p), _) => p.rms_px,
-            (None, Some(p)) => p.rms_px,
-            _ => metric_rms_px,
-        },
+        rms_px: result_rms(perspective.as_ref(), projective.as_ref(), metric_rms_px),
         metric_rms_px,
         metric_upgrade: upgrade,
         rank_ratio,
@@ -2852,11 +2865,7 @@ fn sparse_reconstruction(
         model_selection,
         frames,
         points,
-        rms_px: match (&perspective, &projective) {
-            (Some(p), _) => p.rms_px,
-            (None, Some(p)) => p.rms_px,
-            _ => metric_rms_px,
-        },
+        rms_px: result_rms(perspective.as_ref(), projective.as_ref(), metric_rms_px),
         metric_rms_px,
         metric_upgrade: upgrade,
         singular_values: Vec::new(),
