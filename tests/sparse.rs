@@ -84,11 +84,9 @@ fn sparse_pipeline_reconstructs_a_long_banded_sequence() {
     assert_eq!(r.frames.len(), table.n_frames());
 }
 
-/// A 130-frame strong-perspective corridor (`synth::perspective_corridor`, short tracks):
-/// the default pipeline (`--camera auto`) takes the sparse path, fits the perspective
-/// camera there (`perspective::fit_observations`) and chooses it.
-#[test]
-fn long_perspective_video_runs_the_sparse_perspective_path() {
+/// A 130-frame perspective corridor (`synth::perspective_corridor`, about 40 tracks per
+/// frame, 0.5 px noise, seed 5) as a track table with integer ids, and its true points.
+fn corridor_table() -> (rank3::TrackTable, Vec<nalgebra::Vector3<f64>>) {
     let (obs, truth) = rank3::synth::perspective_corridor(130, 40, 0.5, 5);
     let rows: Vec<(u32, u32, f64, f64)> = obs
         .iter()
@@ -100,6 +98,15 @@ fn long_perspective_video_runs_the_sparse_perspective_path() {
         &rows,
     )
     .unwrap();
+    (table, truth)
+}
+
+/// A 130-frame strong-perspective corridor (`synth::perspective_corridor`, short tracks):
+/// the default pipeline (`--camera auto`) takes the sparse path, fits the perspective
+/// camera there (`perspective::fit_observations`) and chooses it.
+#[test]
+fn long_perspective_video_runs_the_sparse_perspective_path() {
+    let (table, truth) = corridor_table();
     let camera = CameraModel::Auto;
     let mut config = Config {
         camera,
@@ -147,17 +154,7 @@ fn long_perspective_video_runs_the_sparse_perspective_path() {
 /// with its `P_f`, reprojections of the homogeneous points matching the tracks.
 #[test]
 fn long_video_with_the_projective_camera_runs_the_sparse_projective_path() {
-    let (obs, truth) = rank3::synth::perspective_corridor(130, 40, 0.5, 5);
-    let rows: Vec<(u32, u32, f64, f64)> = obs
-        .iter()
-        .map(|o| (o.frame as u32, o.track as u32, o.xy[0], o.xy[1]))
-        .collect();
-    let table = rank3::TrackTable::from_observations(
-        (0..130).map(rank3::table::Id::Int).collect(),
-        (0..truth.len() as i64).map(rank3::table::Id::Int).collect(),
-        &rows,
-    )
-    .unwrap();
+    let (table, _) = corridor_table();
     let config = Config {
         camera: CameraModel::Projective,
         ..Config::default()
