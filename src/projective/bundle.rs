@@ -633,6 +633,48 @@ fn apply(v: &mut [f64], delta: &[f64], basis: &[f64], has_basis: bool, n: usize,
     }
 }
 
+/// The point part of a Schur step from its camera and shared parts:
+/// `δx_p = V_p*⁻¹ (−g_p − Σ_f W_fpᵀ δc_f − W_gpᵀ δg)`, in parallel over tracks, `g_p` given by
+/// `gp(p)` (the gradient, or another right-hand side with the same factor). `dims` =
+/// (camera, point, shared) tangent dimensions. `O(observations · c · d)`.
+#[allow(clippy::too_many_arguments)]
+fn back_substitute<'a>(
+    g: &Graph,
+    lin: &[f64],
+    stride: usize,
+    (cd, pd, k): (usize, usize, usize),
+    lins: &[TrackLin],
+    vinv: &[Vec<f64>],
+    gp: impl Fn(usize) -> &'a [f64] + Sync,
+    dc: &[f64],
+    dg: &[f64],
+) -> Vec<f64> {
+    (0..g.n_pts)
+        .into_par_iter()
+        .flat_map_iter(|p| {
+            let mut b = gp(p).iter().map(|v| -v).collect::<Vec<_>>();
+            for o in g.track(p) {
+                let f = g.cam[o];
+                let wb = &lin[o * stride..o * stride + cd * pd];
+                for c1 in 0..cd {
+                    let dcv = dc[f * cd + c1];
+                    for d in 0..pd {
+                        b[d] -= wb[c1 * pd + d] * dcv;
+                    }
+                }
+            }
+            let wg = &lins[p].wg;
+            for k1 in 0..k {
+                for d in 0..pd {
+                    b[d] -= wg[k1 * pd + d] * dg[k1];
+                }
+            }
+            let vi = &vinv[p];
+            (0..pd).map(move |d1| (0..pd).map(|d2| vi[d1 * pd + d2] * b[d2]).sum::<f64>())
+        })
+        .collect()
+}
+
 /// What the geodesic acceleration of one damped step needs from the iteration.
 struct Accel<'a, M: BundleModel, F: Fn(usize) -> bool> {
     model: &'a M,
@@ -818,29 +860,17 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
             })
             .collect();
         let ag: Vec<f64> = (0..k).map(|i| rhs[(nf * cd + i, 0)]).collect();
-        let ap: Vec<f64> = (0..np)
-            .into_par_iter()
-            .flat_map_iter(|p| {
-                let mut b: Vec<f64> = per_track[p].1.iter().map(|v| -v).collect();
-                for o in g.track(p) {
-                    let f = g.cam[o];
-                    let wb = &self.lin[o * stride..o * stride + cd * pd];
-                    for c1 in 0..cd {
-                        for d in 0..pd {
-                            b[d] -= wb[c1 * pd + d] * ac[f * cd + c1];
-                        }
-                    }
-                }
-                let wg = &self.lins[p].wg;
-                for k1 in 0..k {
-                    for d in 0..pd {
-                        b[d] -= wg[k1 * pd + d] * ag[k1];
-                    }
-                }
-                let vi = &self.vinv[p];
-                (0..pd).map(move |d1| (0..pd).map(|d2| vi[d1 * pd + d2] * b[d2]).sum::<f64>())
-            })
-            .collect();
+        let ap = back_substitute(
+            g,
+            self.lin,
+            stride,
+            (cd, pd, k),
+            self.lins,
+            self.vinv,
+            |p| &per_track[p].1,
+            &ac,
+            &ag,
+        );
         if ac.iter().chain(&ag).chain(&ap).any(|v| !v.is_finite()) {
             return None;
         }
@@ -1345,30 +1375,17 @@ pub fn minimize_shared<M: BundleModel>(
                 continue;
             }
             // Back-substitute the points.
-            let dp: Vec<f64> = (0..np)
-                .into_par_iter()
-                .flat_map_iter(|p| {
-                    let mut b = lins[p].gp.iter().map(|v| -v).collect::<Vec<_>>();
-                    for o in g.track(p) {
-                        let f = g.cam[o];
-                        let wb = &lin[o * stride..o * stride + cd * pd];
-                        for c1 in 0..cd {
-                            let dcv = dc[f * cd + c1];
-                            for d in 0..pd {
-                                b[d] -= wb[c1 * pd + d] * dcv;
-                            }
-                        }
-                    }
-                    let wg = &lins[p].wg;
-                    for k1 in 0..k {
-                        for d in 0..pd {
-                            b[d] -= wg[k1 * pd + d] * dg[k1];
-                        }
-                    }
-                    let vi = &vinv[p];
-                    (0..pd).map(move |d1| (0..pd).map(|d2| vi[d1 * pd + d2] * b[d2]).sum::<f64>())
-                })
-                .collect();
+            let dp = back_substitute(
+                g,
+                &lin,
+                stride,
+                (cd, pd, k),
+                &lins,
+                &vinv,
+                |p| &lins[p].gp,
+                &dc,
+                &dg,
+            );
             // Predicted decrease of `Σ r²` by the linear model: `−gᵀδ + λ δᵀDδ` for the
             // damped normal equations `(JᵀJ + λD) δ = −g`, `g = Jᵀr`.
             let mut pred = 0.0;
