@@ -2188,7 +2188,7 @@ fn complete_block_rank_ratio(
 }
 
 /// Refits the projective verdict may ask for (each a full fit of the new selection).
-const PROJECTIVE_VERDICT_ROUNDS: usize = 3;
+const PROJECTIVE_VERDICT_ROUNDS: usize = 5;
 
 /// The projective verdict ([`projective::verdict::judge`]) on every kept track, over the
 /// fit's frames: (inlier per kept track, flagged entries in kept indices, σ_e, τ_e).
