@@ -400,10 +400,18 @@ pub(crate) fn graph(meas: &Measurements, norm: &Normalization) -> Graph {
 
 /// Linear triangulation of track `p` from unit-norm normalized cameras (flat, 12 per frame).
 fn dlt_point(g: &Graph, cams: &[f64], p: usize) -> [f64; 4] {
+    dlt_views(
+        g.track(p)
+            .map(|o| (&cams[12 * g.cam[o]..12 * g.cam[o] + 12], g.w[o])),
+    )
+}
+
+/// Linear triangulation of one point from its views `(P, w)` (`P` row-major 3×4): the
+/// smallest eigenvector of `Σ aᵀa` over the rows `x P₃ − P₁`, `y P₃ − P₂` (Hartley &
+/// Zisserman §12.2). `O(views)`.
+pub(crate) fn dlt_views<'a>(views: impl Iterator<Item = (&'a [f64], [f64; 2])>) -> [f64; 4] {
     let mut a = Matrix4::<f64>::zeros();
-    for o in g.track(p) {
-        let c = &cams[12 * g.cam[o]..12 * g.cam[o] + 12];
-        let w = g.w[o];
+    for (c, w) in views {
         for (row, wk) in [(0usize, w[0]), (4, w[1])] {
             let v = Vector4::new(
                 wk * c[8] - c[row],
@@ -606,7 +614,7 @@ pub fn fit_observations(
     let t0 = Instant::now();
     observer.on_event(&Event::StageStarted { stage: "windows" });
     let start = if windows.projective {
-        windowed::projective_start(&g, windows, cfg)?
+        windowed::projective_start(&g, windows, cfg, px, observer)?
     } else {
         let (mut c, mut x) = windowed::affine_start(&g, windows)?;
         condition(&mut c, &mut x);
