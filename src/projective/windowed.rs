@@ -31,6 +31,7 @@
 
 use faer::Mat;
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
+use rayon::prelude::*;
 
 use super::bundle::Graph;
 use crate::completion::{self, CompletionConfig};
@@ -193,30 +194,16 @@ pub fn projective_start(
     let mut first = true;
     let mut index = 0;
     let mut window_rms: Vec<f64> = Vec::new();
-    for_each_window(g, cfg, |start, end, tracks, meas| {
+    let mut place = |start: usize,
+                     end: usize,
+                     tracks: &[usize],
+                     meas: &Measurements,
+                     fit: Result<super::ProjectiveFit>|
+     -> Result<()> {
         let seen = seen_in_window(meas, tracks.len());
-        let fit = complete_window(start, end, tracks, meas, cfg).and_then(|c| {
-            super::fit(
-                meas,
-                super::AffineStart {
-                    m: c.m.as_ref(),
-                    s: c.s.as_ref(),
-                    t: &c.t,
-                },
-                pcfg,
-                0,
-                &mut NoopObserver,
-            )
-            .map_err(|e| {
-                Error::Degenerate(format!(
-                    "window of frames {start}..{end} ({} tracks): projective fit failed: {e}",
-                    tracks.len()
-                ))
-            })
-        });
         // A window whose own fit failed, or ended far above the chain's noise level (a
         // local minimum of its affine completion), is extended from the chain instead.
-        let reference = median(&window_rms);
+        let reference = median(&window_rms).max(NOISE_FLOOR);
         let failed = match &fit {
             Err(_) => true,
             Ok(f) => !first && !(f.rms_px <= FAILED_WINDOW_RATIO * reference),
@@ -367,8 +354,60 @@ pub fn projective_start(
         index += 1;
         first = false;
         Ok(())
+    };
+    // The windows' own fits are independent: a batch of them runs in parallel, then the
+    // batch is chained in order (memory: one batch of windows).
+    let batch_size = 4 * rayon::current_num_threads().max(1);
+    let mut batch: Vec<Window> = Vec::new();
+    let mut flush = |batch: &mut Vec<Window>| -> Result<()> {
+        let fits: Vec<Result<super::ProjectiveFit>> = batch
+            .par_iter()
+            .map(|(start, end, tracks, meas)| fit_window(*start, *end, tracks, meas, cfg, pcfg))
+            .collect();
+        for ((start, end, tracks, meas), fit) in batch.drain(..).zip(fits) {
+            place(start, end, &tracks, &meas, fit)?;
+        }
+        Ok(())
+    };
+    for_each_window(g, cfg, |start, end, tracks, meas| {
+        batch.push((start, end, tracks.to_vec(), meas.clone()));
+        if batch.len() >= batch_size {
+            flush(&mut batch)?;
+        }
+        Ok(())
     })?;
+    flush(&mut batch)?;
     Ok((cams, pts))
+}
+
+/// One window's own projective fit: its affine completion, then [`super::fit`] (`pcfg`'s
+/// bridge and bundle adjustment), errors naming the window.
+fn fit_window(
+    start: usize,
+    end: usize,
+    tracks: &[usize],
+    meas: &Measurements,
+    cfg: &WindowConfig,
+    pcfg: &super::ProjectiveConfig,
+) -> Result<super::ProjectiveFit> {
+    let c = complete_window(start, end, tracks, meas, cfg)?;
+    super::fit(
+        meas,
+        super::AffineStart {
+            m: c.m.as_ref(),
+            s: c.s.as_ref(),
+            t: &c.t,
+        },
+        pcfg,
+        0,
+        &mut NoopObserver,
+    )
+    .map_err(|e| {
+        Error::Degenerate(format!(
+            "window of frames {start}..{end} ({} tracks): projective fit failed: {e}",
+            tracks.len()
+        ))
+    })
 }
 
 /// Sum of squared reprojection errors of a window's observations (`meas`, frames from
@@ -405,6 +444,11 @@ fn window_cost(
 /// within a few percent of the median; a local minimum of the window's affine completion
 /// measured 13× (a 20 000-frame corridor, frames 740..780).
 const FAILED_WINDOW_RATIO: f64 = 3.0;
+
+/// The least noise level (graph units, about 2·10⁻⁴ px) the failed-window test and the
+/// extension's trimming assume: noise-free windows end at RMS 10⁻¹²–10⁻¹⁰, and a ratio of
+/// such figures means nothing.
+const NOISE_FLOOR: f64 = 1e-6;
 
 /// Median of `v` (NaN when empty).
 fn median(v: &[f64]) -> f64 {
