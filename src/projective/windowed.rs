@@ -525,8 +525,7 @@ fn map_point(x: &mut [f64], m: &Matrix4<f64>) {
 }
 
 /// One window's own projective fit: its affine completion, then [`super::fit`] (`pcfg`'s
-/// bridge and bundle adjustment), errors naming the window; the model is returned in the
-/// window's near-Euclidean frame ([`near_euclidean`]).
+/// bridge and bundle adjustment), errors naming the window.
 fn fit_window(
     start: usize,
     end: usize,
@@ -536,7 +535,7 @@ fn fit_window(
     pcfg: &super::ProjectiveConfig,
 ) -> Result<super::ProjectiveFit> {
     let c = complete_window(start, end, tracks, meas, cfg)?;
-    let mut fit = super::fit(
+    super::fit(
         meas,
         super::AffineStart {
             m: c.m.as_ref(),
@@ -552,53 +551,7 @@ fn fit_window(
             "window of frames {start}..{end} ({} tracks): projective fit failed: {e}",
             tracks.len()
         ))
-    })?;
-    if let Some(u) = near_euclidean(&c) {
-        let u_inv = u.try_inverse().unwrap_or_else(Matrix4::identity);
-        for cam in &mut fit.model.cameras {
-            map_camera(cam, &u_inv);
-        }
-        for x in &mut fit.model.points {
-            map_point(x, &u);
-        }
-    }
-    Ok(fit)
-}
-
-/// The homography `U = diag(Q⁻¹, 1)` from a window's affine frame (its completion's
-/// `Ŝ`, which the projective fit starts from and stays near) to the frame of its scaled
-/// orthographic metric upgrade (`S = Q⁻¹ Ŝ`, [`crate::metric::upgrade`]), scaled to unit
-/// RMS point spread: a near-Euclidean frame for every window.
-///
-/// Why: the homography `G` between two windows' frames is then close to a similarity. The
-/// completion's gauge (orthonormal `M̂`) differs from window to window by an arbitrary
-/// linear map, and a product of a thousand such maps has singular values that spread
-/// exponentially: the far end of a 20 000-frame chain was not representable in double
-/// precision in the last window's frame (bundle adjustment start at 76 420 px RMS though
-/// every window chained at 0.46 px). `None` when the upgrade fails (the frame is left
-/// affine).
-fn near_euclidean(c: &completion::Completion) -> Option<Matrix4<f64>> {
-    let up = crate::metric::upgrade(
-        c.m.as_ref(),
-        crate::CameraModel::ScaledOrthographic,
-        &crate::metric::MetricConfig::default(),
-    )
-    .ok()?;
-    let q_inv = up.q.try_inverse()?;
-    let n = c.s.ncols().max(1);
-    let mut ss = 0.0;
-    for k in 0..c.s.ncols() {
-        let x = q_inv * Vector3::new(c.s[(0, k)], c.s[(1, k)], c.s[(2, k)]);
-        ss += x.norm_squared();
-    }
-    let spread = (ss / n as f64).sqrt();
-    if !(spread.is_finite() && spread > 0.0) {
-        return None;
-    }
-    let a = q_inv / spread;
-    let mut u = Matrix4::identity();
-    u.fixed_view_mut::<3, 3>(0, 0).copy_from(&a);
-    Some(u)
+    })
 }
 
 /// Sum of squared reprojection errors of a window's observations (`meas`, frames from
