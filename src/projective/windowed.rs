@@ -399,7 +399,9 @@ pub fn projective_start(
 /// there or later — are mapped into it; the others are frozen with the index of their
 /// frame (an *epoch*), and [`Self::finish`] maps every frozen entity into the last epoch's
 /// frame once, by the product of the epochs' homographies. The result is the same
-/// reconstruction up to one homography, built in well-conditioned coordinates. Cost:
+/// reconstruction up to one homography, built in well-conditioned coordinates. (That last
+/// mapping is itself ill-conditioned over a thousand windows: at 20 000 frames the early
+/// frames are lost in the last window's frame; docs/math.md §8.) Cost:
 /// `O(active entities)` per window and `O(F + N)` at the end (linear in the frames for
 /// tracks of bounded length).
 struct WorkingFrame {
