@@ -209,7 +209,7 @@ pub fn projective_start(
             Err(_) => true,
             Ok(f) => !first && !(f.rms_px <= FAILED_WINDOW_RATIO * reference),
         };
-        if failed && !first {
+        let reanchor = if failed && !first {
             let why = match &fit {
                 Err(e) => e.to_string(),
                 Ok(f) => format!(
@@ -243,92 +243,70 @@ pub fn projective_start(
                      extended from the chain instead (resection and triangulation)"
                 ),
             });
-            if cfg.local_iterations > 0 {
-                let lo = start.saturating_sub(cfg.window - cfg.overlap);
-                local_refine(
-                    g,
-                    &mut cams,
-                    &mut pts,
-                    lo,
-                    start,
-                    end,
-                    cfg.local_iterations,
-                    pcfg,
-                )?;
-            }
-            frame.activate(tracks, &placed);
-            let (cost, n) = window_cost(&cams, &pts, start, tracks, meas);
-            observer.on_event(&Event::Iteration {
-                solver: "windows",
-                run: 0,
-                iteration: index,
-                cost,
-                rms: px * (cost / n.max(1) as f64).sqrt(),
-                lambda: f64::NAN,
-            });
-            index += 1;
-            return Ok(());
-        }
-        let fit = fit?;
-        window_rms.push(fit.rms_px);
-        let model = fit.model;
-        let gm = if first {
-            Matrix4::identity()
+            None
         } else {
-            let shared = anchors(tracks, &placed, &seen, &placed_n, cfg);
-            if shared.len() < 6 {
-                return Err(too_few_shared(start, end, shared.len(), 6));
-            }
-            let mut ata = nalgebra::SMatrix::<f64, 16, 16>::zeros();
-            for &k in &shared {
-                let x = model.points[k];
-                let y = &pts[4 * tracks[k]..4 * tracks[k] + 4];
-                for i in 0..4 {
-                    for j in i + 1..4 {
-                        // y_i (G x)_j − y_j (G x)_i = Σ_l (y_i x_l G_jl − y_j x_l G_il).
-                        let mut row = nalgebra::SVector::<f64, 16>::zeros();
-                        for l in 0..4 {
-                            row[4 * j + l] += y[i] * x[l];
-                            row[4 * i + l] -= y[j] * x[l];
+            let fit = fit?;
+            window_rms.push(fit.rms_px);
+            let model = fit.model;
+            let gm = if first {
+                Matrix4::identity()
+            } else {
+                let shared = anchors(tracks, &placed, &seen, &placed_n, cfg);
+                if shared.len() < 6 {
+                    return Err(too_few_shared(start, end, shared.len(), 6));
+                }
+                let mut ata = nalgebra::SMatrix::<f64, 16, 16>::zeros();
+                for &k in &shared {
+                    let x = model.points[k];
+                    let y = &pts[4 * tracks[k]..4 * tracks[k] + 4];
+                    for i in 0..4 {
+                        for j in i + 1..4 {
+                            // y_i (G x)_j − y_j (G x)_i = Σ_l (y_i x_l G_jl − y_j x_l G_il).
+                            let mut row = nalgebra::SVector::<f64, 16>::zeros();
+                            for l in 0..4 {
+                                row[4 * j + l] += y[i] * x[l];
+                                row[4 * i + l] -= y[j] * x[l];
+                            }
+                            ata += row * row.transpose();
                         }
-                        ata += row * row.transpose();
                     }
                 }
-            }
-            let e = nalgebra::SymmetricEigen::new(ata);
-            let v = e.eigenvectors.column(e.eigenvalues.imin());
-            Matrix4::from_fn(|r, c| v[4 * r + c])
-        };
-        let ginv = gm.try_inverse().ok_or_else(|| {
-            Error::Degenerate(format!(
-                "frames {start}..{end}: the homography to the earlier frames is singular"
-            ))
-        })?;
-        for f in start..end {
-            if cam_done[f] {
-                continue;
-            }
-            let p = model.cameras[f - start];
-            for r in 0..3 {
-                for col in 0..4 {
-                    cams[12 * f + 4 * r + col] =
-                        (0..4).map(|k| p[4 * r + k] * ginv[(k, col)]).sum();
+                let e = nalgebra::SymmetricEigen::new(ata);
+                let v = e.eigenvectors.column(e.eigenvalues.imin());
+                Matrix4::from_fn(|r, c| v[4 * r + c])
+            };
+            let ginv = gm.try_inverse().ok_or_else(|| {
+                Error::Degenerate(format!(
+                    "frames {start}..{end}: the homography to the earlier frames is singular"
+                ))
+            })?;
+            for f in start..end {
+                if cam_done[f] {
+                    continue;
                 }
+                let p = model.cameras[f - start];
+                for r in 0..3 {
+                    for col in 0..4 {
+                        cams[12 * f + 4 * r + col] =
+                            (0..4).map(|k| p[4 * r + k] * ginv[(k, col)]).sum();
+                    }
+                }
+                super::bundle::normalize(&mut cams[12 * f..12 * f + 12]);
+                cam_done[f] = true;
             }
-            super::bundle::normalize(&mut cams[12 * f..12 * f + 12]);
-            cam_done[f] = true;
-        }
-        for (k, &p) in tracks.iter().enumerate() {
-            if placed[p] {
-                continue;
+            for (k, &p) in tracks.iter().enumerate() {
+                if placed[p] {
+                    continue;
+                }
+                let x = Vector4::from(model.points[k]);
+                let y = gm * x;
+                pts[4 * p..4 * p + 4].copy_from_slice(y.as_slice());
+                super::bundle::normalize(&mut pts[4 * p..4 * p + 4]);
+                placed[p] = true;
+                placed_n[p] = seen[k];
             }
-            let x = Vector4::from(model.points[k]);
-            let y = gm * x;
-            pts[4 * p..4 * p + 4].copy_from_slice(y.as_slice());
-            super::bundle::normalize(&mut pts[4 * p..4 * p + 4]);
-            placed[p] = true;
-            placed_n[p] = seen[k];
-        }
+            Some((ginv, gm))
+        };
         if !first && cfg.local_iterations > 0 {
             // Sliding-window bundle adjustment: this window and the previous one, the
             // previous window's own frames held fixed (they anchor the gauge).
@@ -354,9 +332,9 @@ pub fn projective_start(
             lambda: f64::NAN,
         });
         frame.activate(tracks, &placed);
-        if !first {
+        if let Some((h, h_inv)) = reanchor.filter(|_| !first) {
             // The chain goes on in this window's own frame (`X_win = G⁻¹ X`).
-            frame.reanchor(&ginv, &gm, start, &mut cams, &cam_done, &mut pts);
+            frame.reanchor(&h, &h_inv, start, &mut cams, &cam_done, &mut pts);
         }
         index += 1;
         first = false;
