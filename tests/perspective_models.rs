@@ -212,6 +212,24 @@ fn cauchy_loss_discounts_gross_entries_without_the_robust_pass() {
     );
 }
 
+/// The house at 2.5 radii, 20 frames × 100 tracks, 0.5 px noise: the scenes of
+/// `perspective_models` (`base` there), with a zoom, missing data and a seed.
+fn house_20x100(zoom: f64, missing: f64, seed: u64) -> SynthScene {
+    generate(&SynthConfig {
+        camera: CameraModel::Perspective,
+        shape: Shape::House,
+        frames: 20,
+        points: 100,
+        noise: 0.5,
+        distance: 2.5,
+        zoom,
+        missing,
+        seed,
+        ..SynthConfig::default()
+    })
+    .unwrap()
+}
+
 /// Strong perspective with 30 % missing (seed 14, house, 20 × 100): the affine robust pass
 /// rejects 45 tracks that only perspective explains and leaves the last frame with 5, too
 /// few for a projective camera. `--camera auto` used to keep the affine model of half the
@@ -219,18 +237,7 @@ fn cauchy_loss_discounts_gross_entries_without_the_robust_pass() {
 /// perspective camera is chosen (0.45 % median over seeds 0–19, docs/results.md).
 #[test]
 fn auto_survives_an_affine_selection_that_starves_a_frame() {
-    let s = generate(&SynthConfig {
-        camera: CameraModel::Perspective,
-        shape: Shape::House,
-        frames: 20,
-        points: 100,
-        noise: 0.5,
-        distance: 2.5,
-        missing: 0.3,
-        seed: 14,
-        ..SynthConfig::default()
-    })
-    .unwrap();
+    let s = house_20x100(0.0, 0.3, 14);
     let mut cfg = Config {
         camera: CameraModel::Auto,
         ..Config::default()
@@ -278,19 +285,7 @@ fn auto_survives_an_affine_selection_that_starves_a_frame() {
 /// 0.74 %; `perspective_models zoom`).
 #[test]
 fn verdict_rejudges_flags_of_a_sparsely_seen_zooming_frame() {
-    let s = generate(&SynthConfig {
-        camera: CameraModel::Perspective,
-        shape: Shape::House,
-        frames: 20,
-        points: 100,
-        noise: 0.5,
-        distance: 2.5,
-        zoom: 0.5,
-        missing: 0.3,
-        seed: 1,
-        ..SynthConfig::default()
-    })
-    .unwrap();
+    let s = house_20x100(0.5, 0.3, 1);
     let mut cfg = config(true, false);
     cfg.robust = Config::default().robust;
     let (rec, focal, structure) = run(&s, &cfg);
