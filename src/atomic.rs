@@ -36,7 +36,8 @@ pub(crate) fn write_file(
 }
 
 /// Writes `path` with `body` through a temporary file renamed into place (see the module
-/// documentation). Errors name `path` (or the temporary file it was being written as).
+/// documentation). Errors name `path`, also when writing its temporary file failed (a full
+/// disk, a file-size limit): the user asked for `path`, not for the temporary name.
 pub fn write_with(
     path: &Path,
     body: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
@@ -51,6 +52,10 @@ pub fn write_with(
         .unwrap_or_else(|| "output".into());
     let tmp = temp_path(dir, &name);
     let done = write_file(&tmp, body)
+        .map_err(|e| match e {
+            Error::Io { source, .. } => Error::io(path, source),
+            e => e,
+        })
         .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e)));
     if done.is_err() {
         let _ = std::fs::remove_file(&tmp);
@@ -78,7 +83,10 @@ mod tests {
             std::io::Write::write_all(w, b"new but")?;
             Err(std::io::Error::other("disk full"))
         });
-        assert!(matches!(r, Err(Error::Io { .. })), "{r:?}");
+        match &r {
+            Err(Error::Io { path: p, .. }) => assert_eq!(p, &path, "the error names the file"),
+            r => panic!("{r:?}"),
+        }
         assert_eq!(
             std::fs::read_to_string(&path).unwrap(),
             "old complete file\n"

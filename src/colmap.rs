@@ -317,7 +317,11 @@ impl ColmapModel {
             temps.push((tmp.clone(), dir.join(name)));
             if let Err(e) = write_file(&tmp, |w| body(self, w)) {
                 remove(&temps);
-                return Err(e);
+                // Named by the file asked for, not its temporary name.
+                return Err(match e {
+                    Error::Io { source, .. } => Error::io(dir.join(name), source),
+                    e => e,
+                });
             }
         }
         for (k, (tmp, dest)) in temps.iter().enumerate() {
