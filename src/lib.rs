@@ -27,6 +27,7 @@ pub mod colmap;
 pub mod compare;
 pub mod completion;
 pub mod datasets;
+pub mod degeneracy;
 pub mod error;
 pub mod eval;
 pub mod measurements;

@@ -2,6 +2,10 @@
 //!
 //! 1. **Set-aside** ([`TrackTable::set_aside`]): tracks seen in too few frames, frames with
 //!    too few tracks, and blocks disconnected from the main one are reported, not used.
+//!    Then **degenerate input** is refused before the robust pass ([`crate::degeneracy`]:
+//!    static camera, collinear points, rank < 3, coordinates too large for double
+//!    precision), and the image origin is moved to the observations' centroid, so that no
+//!    stage depends on where it is; the results are moved back at the end.
 //! 2. **Affine factorization**. Complete data: the centering trick (Tomasi & Kanade 1992,
 //!    §3.4) `t_f = mean_p w_fp`, `W̃ = W − t 1ᵀ`, and the rank-3 truncation
 //!    `W̃ ≈ U₃Σ₃V₃ᵀ` (Eckart–Young), `M̂ = U₃Σ₃^{1/2}`, `Ŝ = Σ₃^{1/2}V₃ᵀ`, by a truncated SVD
@@ -27,6 +31,7 @@ use serde::Serialize;
 use rand::SeedableRng;
 
 use crate::completion::{self, CompletionConfig, CompletionModel, CompletionSolverKind};
+use crate::degeneracy;
 use crate::metric::{self, MetricConfig, MetricUpgrade};
 use crate::perspective::{self, PerspectiveConfig};
 use crate::projective::{self, ProjectiveConfig, ProjectiveModel};
@@ -1103,19 +1108,30 @@ impl Reconstruction {
         //    camera (2×4) needs 4 points per frame when it is estimated jointly with the
         //    translation (missing data); centering needs only 3.
         let min_points = min_points_per_frame(config, table.is_complete());
-        let (kept_table, set_aside, frames, tracks) = timer.run("set-aside", |_| {
+        let (mut kept_table, set_aside, frames, tracks) = timer.run("set-aside", |_| {
             table.set_aside(config.min_frames_per_track, min_points)
         });
         check_size(&kept_table)?;
+        // Degenerate input is named before the robust pass; the image origin is moved to the
+        // centroid of the observations, and the results are moved back at the end.
+        let check = degeneracy::check(&kept_table)?;
+        warnings.extend(check.warnings);
+        let origin = check.origin;
+        kept_table.translate([-origin[0], -origin[1]]);
+        let (centred_config, pp_from_image_size) = centred_config(config, origin);
+        let config = centred_config.as_ref().unwrap_or(config);
         let kept = Kept {
             table: &kept_table,
             frames,
             tracks,
             set_aside,
+            origin,
         };
         // Long or sparse tables take the sparse pipeline.
         if let Some(reason) = sparse_reason(&kept_table, config)? {
-            return sparse_reconstruction(table, kept, config, timer, reason);
+            let mut rec = sparse_reconstruction(table, kept, config, timer, reason, warnings)?;
+            restore_image_origin(&mut rec, origin, pp_from_image_size);
+            return Ok(rec);
         }
         // 2. Robust pass (affine): outlier tracks, gross entries, other rigid objects.
         let mut selection = robust_stage(&kept, config, &mut timer, &mut warnings)?;
@@ -1159,10 +1175,12 @@ impl Reconstruction {
             &mut timer,
             &mut warnings,
         )?;
-        // 7. The result.
-        Ok(assemble(
+        // 7. The result, in the input's image coordinates.
+        let mut rec = assemble(
             table, kept, selection, fitted, outliers, choice, timer, warnings,
-        ))
+        );
+        restore_image_origin(&mut rec, origin, pp_from_image_size);
+        Ok(rec)
     }
 
     /// The fit's prediction laid out like the input table (2F×N in the input's frame and
@@ -1637,8 +1655,10 @@ fn camera_stage(
         model_selection = Some(sel);
     }
     if let Some(p) = &perspective {
+        // (The principal point in the input's image coordinates.)
         let side = p.intrinsics.image_size.map_or(
-            2.0 * p.intrinsics.principal_point[0].max(p.intrinsics.principal_point[1]),
+            2.0 * (p.intrinsics.principal_point[0] + kept.origin[0])
+                .max(p.intrinsics.principal_point[1] + kept.origin[1]),
             |[w, h]| w.max(h) as f64,
         );
         if p.intrinsics.focal_px > 20.0 * side {
@@ -2640,6 +2660,84 @@ struct Kept<'a> {
     frames: Vec<usize>,
     tracks: Vec<usize>,
     set_aside: Vec<SetAside>,
+    /// The input's coordinates of `table`'s origin ([`degeneracy::check`]): `table` holds
+    /// the input's positions minus `origin`.
+    origin: [f64; 2],
+}
+
+/// `config` with the principal point in the coordinates of a table moved by `−origin`:
+/// a given principal point is moved with it, and the image centre of a given image size is
+/// given explicitly (the second value says so, for [`restore_image_origin`] to name its
+/// source again). `None` when no setting depends on the image origin.
+fn centred_config(config: &Config, origin: [f64; 2]) -> (Option<Config>, bool) {
+    let k = &config.perspective.intrinsics;
+    let (pp, from_size) = match (k.principal_point, k.image_size) {
+        (Some(c), _) => (c, false),
+        // The image centre `perspective::assumed_frame_of` takes.
+        (None, Some([w, h])) => ([(w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0], true),
+        (None, None) => return (None, false),
+    };
+    let mut c = config.clone();
+    c.perspective.intrinsics.principal_point = Some([pp[0] - origin[0], pp[1] - origin[1]]);
+    (Some(c), from_size)
+}
+
+/// Moves a reconstruction computed on a table translated by `−origin` back to the input's
+/// image coordinates: the cameras' translations, the affine predictions, the projective
+/// cameras (`P ← [I₂ origin; 0 1] P`, renormalised to unit Frobenius norm) and the
+/// perspective principal point. Everything else (rotations, scales, points, residuals) does
+/// not depend on the image origin. `O(F·N)` for the predictions.
+fn restore_image_origin(rec: &mut Reconstruction, origin: [f64; 2], pp_from_image_size: bool) {
+    if origin == [0.0, 0.0] {
+        return;
+    }
+    let o = Vector2::new(origin[0], origin[1]);
+    for f in &mut rec.frames {
+        f.translation[0] += origin[0];
+        f.translation[1] += origin[1];
+    }
+    for t in rec
+        .model
+        .translations
+        .iter_mut()
+        .chain(rec.outlier_model.translations.iter_mut())
+    {
+        *t += o;
+    }
+    for m in [&mut rec.affine_prediction, &mut rec.outlier_prediction] {
+        for j in 0..m.ncols() {
+            for r in 0..m.nrows() {
+                m[(r, j)] += origin[r % 2];
+            }
+        }
+    }
+    if let Some(pr) = &mut rec.projective {
+        for c in &mut pr.model.cameras {
+            for k in 0..4 {
+                c[k] += origin[0] * c[8 + k];
+                c[4 + k] += origin[1] * c[8 + k];
+            }
+            let norm = c.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if norm > 0.0 && norm.is_finite() {
+                c.iter_mut().for_each(|v| *v /= norm);
+            }
+        }
+        if pr.cameras.len() == pr.model.cameras.len() {
+            for (f, cam) in pr.cameras.iter_mut().enumerate() {
+                cam.p = pr.model.camera_matrix(f);
+            }
+        }
+    }
+    if let Some(pe) = &mut rec.perspective {
+        for d in 0..2 {
+            pe.model.principal_point[d] += origin[d];
+            pe.intrinsics.principal_point[d] += origin[d];
+            pe.intrinsics.k[d][2] += origin[d];
+        }
+        if pp_from_image_size && pe.intrinsics.principal_point_source == "given" {
+            pe.intrinsics.principal_point_source = "image centre";
+        }
+    }
 }
 
 /// The sparse pipeline ([`crate::sparse`]) and its [`Reconstruction`]: frames, points,
@@ -2651,17 +2749,22 @@ fn sparse_reconstruction(
     config: &Config,
     mut timer: Timer<'_>,
     reason: String,
+    mut warnings: Vec<String>,
 ) -> Result<Reconstruction> {
     let Kept {
         table: kept,
         frames: kept_frames,
         tracks: kept_tracks,
         set_aside,
+        ..
     } = kept;
-    let mut warnings = vec![format!(
-        "sparse pipeline: {reason}; the dense-only stages (RANSAC robust pass, σ4/σ3, metric \
-         refinement, completed.txt) do not run"
-    )];
+    warnings.insert(
+        0,
+        format!(
+            "sparse pipeline: {reason}; the dense-only stages (RANSAC robust pass, σ4/σ3, \
+             metric refinement, completed.txt) do not run"
+        ),
+    );
     let affine_camera = config.camera.affine();
     let t0 = Instant::now();
     let (prob, fit) = timer.run("sparse-fit", |obs| {

@@ -739,6 +739,14 @@ impl TrackTable {
         comps
     }
 
+    /// Adds `d` to every observation's coordinates. `O(observations)`.
+    pub fn translate(&mut self, d: [f64; 2]) {
+        for e in self.rows.iter_mut().flatten() {
+            e.x += d[0];
+            e.y += d[1];
+        }
+    }
+
     /// A copy with frames and tracks reordered (`frames[k]` is the old index of new frame k).
     pub fn permuted(&self, frames: &[usize], tracks: &[usize]) -> TrackTable {
         self.select(frames, tracks)
