@@ -187,7 +187,11 @@ fn single_object_pipeline_rejects_a_second_object_as_tracks() {
 /// Hopkins `cars1` (skipped without the data set; a car moving slowly in front of a moving
 /// camera): the affine robust pass alone kept 50 of the car's 77 tracks with 155 of their
 /// entries flagged as gross errors (F1 of the rejections 0.50); the other-objects check
-/// finds the car as a rigid group and rejects its tracks whole.
+/// finds the car as a rigid group and rejects its tracks whole. Seeds 0 and 1 (the RANSAC
+/// draws; `RANK3_SEEDS=N` runs seeds 0..N). With one pooled noise level the check found the
+/// car on one seed of six; with each model's own (`segment::other_objects`) and the tracks
+/// outside the group re-judged, on all six (66–77 of the car's 77 tracks rejected, 4–8 of
+/// the scene's).
 #[test]
 fn hopkins_second_object_is_rejected_as_tracks() {
     let Some(path) = rank3::datasets::find("hopkins_dev/cars1.txt") else {
@@ -199,8 +203,34 @@ fn hopkins_second_object_is_rejected_as_tracks() {
         camera: CameraModel::Orthographic,
         ..Default::default()
     };
-    let rec = rank3::Reconstruction::from_tracks(&table, &config).unwrap();
+    let seeds: Vec<u64> = std::env::var("RANK3_SEEDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .map_or(vec![0, 1], |n: u64| (0..n).collect());
+    for seed in seeds {
+        second_object_rejected(
+            &h,
+            &table,
+            &Config {
+                seed,
+                ..config.clone()
+            },
+        );
+    }
+}
+
+/// The checks of [`hopkins_second_object_is_rejected_as_tracks`] for one configuration.
+fn second_object_rejected(
+    h: &rank3::datasets::Hopkins,
+    table: &rank3::TrackTable,
+    config: &Config,
+) {
+    let rec = rank3::Reconstruction::from_tracks(table, config).unwrap();
     let rb = rec.robust.as_ref().unwrap();
+    eprintln!(
+        "seed {}: {} groups, {} outlier tracks, {} flagged entries",
+        config.seed, rb.rigid_groups_seen, rb.n_outlier_tracks, rb.n_flagged_entries
+    );
     assert_eq!(rb.rigid_groups_seen, 2);
     let mut sizes = vec![0usize; h.n_groups];
     h.groups.iter().for_each(|&g| sizes[g] += 1);
