@@ -1115,11 +1115,15 @@ fn best_matching(conf: &[Vec<usize>], kf: usize, kt: usize) -> usize {
 /// car's gain fell below its label cost on five seeds of six; a ratio of residual sums
 /// does not depend on that estimate. Random walks are explained no better by a subspace of
 /// their own than by `main` (a ratio near 1), and tracks of the main body flagged for a few
-/// gross entries fit `main` as well as any subspace, so neither is returned. Returns the
-/// groups as track indices into `meas`, largest first (empty when there are fewer than
-/// `2 · min_group_tracks` candidates or no group passes).
+/// gross entries fit `main` as well as any subspace, so neither is returned. Then every
+/// track outside the groups found (a candidate the segmentation left out, or a track the
+/// robust pass kept whole) joins the group whose subspace explains it better than `main`
+/// by `ν ln(r²_main / r²_own) > 2 ln(2 n_obs)`. Returns the groups as track indices into
+/// `meas`, largest first (empty when there are fewer than `2 · min_group_tracks`
+/// candidates or no group passes).
 ///
-/// Complexity: that of [`segment`] on the candidates, plus O(n_obs) for the comparisons.
+/// Complexity: that of [`segment`] on the candidates, plus O(F·N) for building the track
+/// estimator over all tracks and O(n_obs · groups) for the comparisons.
 pub fn other_objects<R: Rng + ?Sized>(
     meas: &Measurements,
     main: &AffineSubspace,
