@@ -49,10 +49,13 @@ fn variant(name: &str) -> Option<ProjectiveConfig> {
         cfg.refine.damp_points = true;
         cfg.refine.resolve_points = false;
     }
-    // Experiments: `NOISE_TOL=τ` / `GEO=α` set the adjustment's noise-level stop and
-    // geodesic acceleration.
+    // Experiments: `NOISE_TOL=τ` / `REL_TOL=τ` / `GEO=α` set the adjustment's noise-level
+    // stop, its relative tail stop and geodesic acceleration.
     if let Some(t) = std::env::var("NOISE_TOL").ok().and_then(|v| v.parse().ok()) {
         cfg.refine.noise_tolerance = t;
+    }
+    if let Some(t) = std::env::var("REL_TOL").ok().and_then(|v| v.parse().ok()) {
+        cfg.refine.window_relative_tolerance = t;
     }
     if let Some(a) = std::env::var("GEO").ok().and_then(|v| v.parse().ok()) {
         cfg.refine.geodesic_acceleration = a;

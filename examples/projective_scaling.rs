@@ -67,7 +67,8 @@ impl rank3::Observer for Printer {
 /// chaining affine windows (`WindowConfig::projective = false`) instead of projective ones.
 /// `JOINT=1` in the environment uses the joint (damped points, no re-solve) bundle
 /// adjustment instead of variable projection, `DIRECT=1` skips pOSE, `GEO=α` sets the
-/// geodesic acceleration, `NOISE_TOL=τ` the noise-level stop (0: off), and `METRIC_START=1`
+/// geodesic acceleration, `NOISE_TOL=τ` the noise-level stop (0: off), `REL_TOL=τ` the
+/// relative tail stop (0: off), and `METRIC_START=1`
 /// starts the adjustment from the metric chain's cameras (experiments).
 fn config(max_iterations: Option<usize>) -> ProjectiveConfig {
     let mut c = ProjectiveConfig::default();
@@ -77,6 +78,9 @@ fn config(max_iterations: Option<usize>) -> ProjectiveConfig {
     if std::env::var_os("JOINT").is_some() {
         c.refine.damp_points = true;
         c.refine.resolve_points = false;
+    }
+    if let Some(t) = std::env::var("REL_TOL").ok().and_then(|v| v.parse().ok()) {
+        c.refine.window_relative_tolerance = t;
     }
     if let Some(a) = std::env::var("GEO").ok().and_then(|v| v.parse().ok()) {
         c.refine.geodesic_acceleration = a;
