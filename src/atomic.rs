@@ -68,9 +68,101 @@ pub fn write(path: &Path, bytes: impl AsRef<[u8]>) -> Result<()> {
     write_with(path, |w| std::io::Write::write_all(w, bytes.as_ref()))
 }
 
+/// A set of files written together: each is written whole to its temporary file as it is
+/// [`add`](Self::add)ed, and none replaces its destination until [`commit`](Self::commit)
+/// renames them all. A failure while writing (a full disk, a file-size limit) therefore
+/// leaves every destination as it was — not new small files beside an earlier run's large
+/// ones. Temporary files not committed are removed when the set is dropped. (A failure of
+/// a `rename` itself, after the data are on disk, can still leave the set part renamed.)
+#[derive(Debug, Default)]
+pub struct FileSet {
+    /// (temporary file, destination), in the order added.
+    staged: Vec<(PathBuf, PathBuf)>,
+}
+
+impl FileSet {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Writes `bytes` to a temporary file beside `path`. Errors name `path`.
+    pub fn add(&mut self, path: &Path, bytes: impl AsRef<[u8]>) -> Result<()> {
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "output".into());
+        let tmp = temp_path(dir, &name);
+        match write_file(&tmp, |w| std::io::Write::write_all(w, bytes.as_ref())) {
+            Ok(()) => {
+                self.staged.push((tmp, path.to_path_buf()));
+                Ok(())
+            }
+            Err(e) => {
+                let _ = std::fs::remove_file(&tmp);
+                Err(match e {
+                    Error::Io { source, .. } => Error::io(path, source),
+                    e => e,
+                })
+            }
+        }
+    }
+
+    /// Renames every staged file into place, in the order added.
+    pub fn commit(mut self) -> Result<()> {
+        for (tmp, dest) in std::mem::take(&mut self.staged) {
+            if let Err(e) = std::fs::rename(&tmp, &dest) {
+                let _ = std::fs::remove_file(&tmp);
+                return Err(Error::io(&dest, e));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Drop for FileSet {
+    fn drop(&mut self) {
+        for (tmp, _) in &self.staged {
+            let _ = std::fs::remove_file(tmp);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_file_set_replaces_all_or_nothing() {
+        let dir = std::env::temp_dir().join(format!("rank3-fileset-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (a, b) = (dir.join("a.txt"), dir.join("b.txt"));
+        write(&a, "old a").unwrap();
+        write(&b, "old b").unwrap();
+        // The second file cannot be written (its folder does not exist): nothing replaced.
+        let mut set = FileSet::new();
+        set.add(&a, "new a").unwrap();
+        let bad = dir.join("missing").join("c.txt");
+        match set.add(&bad, "new c") {
+            Err(Error::Io { path, .. }) => assert_eq!(path, bad),
+            r => panic!("{r:?}"),
+        }
+        drop(set);
+        assert_eq!(std::fs::read_to_string(&a).unwrap(), "old a");
+        let mut set = FileSet::new();
+        set.add(&a, "new a").unwrap();
+        set.add(&b, "new b").unwrap();
+        assert_eq!(std::fs::read_to_string(&a).unwrap(), "old a");
+        set.commit().unwrap();
+        assert_eq!(std::fs::read_to_string(&a).unwrap(), "new a");
+        assert_eq!(std::fs::read_to_string(&b).unwrap(), "new b");
+        let left: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+        assert_eq!(left.len(), 2, "temporary files left: {left:?}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     #[test]
     fn a_failed_write_leaves_the_old_file_and_no_temporary() {

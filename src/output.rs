@@ -48,14 +48,17 @@ pub fn write_all_with(
 ) -> Result<Written> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let [json, completed, ply] = RECONSTRUCTION_FILES.map(|name| dir.join(name));
-    crate::atomic::write(&json, rec.to_json())?;
+    // One set: a failure while writing any of them replaces none.
+    let mut set = crate::atomic::FileSet::new();
+    set.add(&json, rec.to_json())?;
     let completed = if rec.sparse.is_none() {
-        write_completed(rec, &completed)?;
+        set.add(&completed, completed_text(rec))?;
         Some(completed)
     } else {
         None
     };
-    write_ply_with(rec, &ply, ply_opts)?;
+    set.add(&ply, ply_bytes(rec, ply_opts))?;
+    set.commit()?;
     Ok(Written {
         json,
         completed,
@@ -66,6 +69,11 @@ pub fn write_all_with(
 /// The affine prediction of every track in every frame, dense 2F×N in the input's frame and
 /// track order (set-aside frames/tracks are `nan`), with comment lines naming the ids.
 pub fn write_completed(rec: &Reconstruction, path: &Path) -> Result<()> {
+    crate::atomic::write(path, completed_text(rec))
+}
+
+/// The text of [`write_completed`].
+fn completed_text(rec: &Reconstruction) -> String {
     let m = rec.completed_matrix();
     let ids = |v: &[crate::Id]| {
         v.iter()
@@ -82,7 +90,7 @@ pub fn write_completed(rec: &Reconstruction, path: &Path) -> Result<()> {
         ids(&rec.input_track_ids)
     );
     write_matrix(&mut s, m.nrows(), m.ncols(), |r, c| m[(r, c)]);
-    crate::atomic::write(path, s)
+    s
 }
 
 /// Binary little-endian PLY with `float x, y, z` per point (and `uchar inlier`).
@@ -95,6 +103,11 @@ pub fn write_ply(rec: &Reconstruction, path: &Path) -> Result<()> {
 /// [`write_ply`] with `uchar red, green, blue` after `z` when colours are given, and only
 /// the inlier points when asked.
 pub fn write_ply_with(rec: &Reconstruction, path: &Path, opts: PlyOptions<'_>) -> Result<()> {
+    crate::atomic::write(path, ply_bytes(rec, opts))
+}
+
+/// The bytes of [`write_ply_with`].
+fn ply_bytes(rec: &Reconstruction, opts: PlyOptions<'_>) -> Vec<u8> {
     let points: Vec<_> = rec
         .perspective
         .as_ref()
@@ -124,7 +137,7 @@ pub fn write_ply_with(rec: &Reconstruction, path: &Path, opts: PlyOptions<'_>) -
         }
         buf.push(u8::from(p.inlier));
     }
-    crate::atomic::write(path, buf)
+    buf
 }
 
 /// The perspective reconstruction of `rec` as a COLMAP sparse model ([`crate::colmap`]):
