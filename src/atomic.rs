@@ -21,6 +21,19 @@ pub(crate) fn temp_path(dir: &Path, name: &str) -> PathBuf {
     dir.join(format!(".{name}.rank3-tmp-{}-{n}", std::process::id()))
 }
 
+/// A fresh temporary path for `path`, in its folder.
+fn temp_for(path: &Path) -> PathBuf {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "output".into());
+    temp_path(dir, &name)
+}
+
 /// Creates `path`, writes it with `body` and flushes it to disk.
 pub(crate) fn write_file(
     path: &Path,
@@ -42,15 +55,7 @@ pub fn write_with(
     path: &Path,
     body: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 ) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "output".into());
-    let tmp = temp_path(dir, &name);
+    let tmp = temp_for(path);
     let done = write_file(&tmp, body)
         .map_err(|e| match e {
             Error::Io { source, .. } => Error::io(path, source),
@@ -87,15 +92,7 @@ impl FileSet {
 
     /// Writes `bytes` to a temporary file beside `path`. Errors name `path`.
     pub fn add(&mut self, path: &Path, bytes: impl AsRef<[u8]>) -> Result<()> {
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d,
-            _ => Path::new("."),
-        };
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "output".into());
-        let tmp = temp_path(dir, &name);
+        let tmp = temp_for(path);
         match write_file(&tmp, |w| std::io::Write::write_all(w, bytes.as_ref())) {
             Ok(()) => {
                 self.staged.push((tmp, path.to_path_buf()));
