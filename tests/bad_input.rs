@@ -604,22 +604,7 @@ fn a_full_disk_leaves_every_previous_output_whole() {
     for limit in [512, sizes[sizes.len() / 2]] {
         // Different settings, so that a new file differs from the old one.
         let mut cmd = reconstruct(&["--no-refine"]);
-        unsafe {
-            use std::os::unix::process::CommandExt;
-            cmd.pre_exec(move || {
-                if libc::signal(libc::SIGXFSZ, libc::SIG_IGN) == libc::SIG_ERR {
-                    return Err(std::io::Error::last_os_error());
-                }
-                let lim = libc::rlimit {
-                    rlim_cur: limit,
-                    rlim_max: limit,
-                };
-                if libc::setrlimit(libc::RLIMIT_FSIZE, &lim) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-                Ok(())
-            });
-        }
+        limit_file_size(&mut cmd, limit);
         let run = cmd.output().unwrap();
         let stderr = String::from_utf8_lossy(&run.stderr);
         assert_eq!(run.status.code(), Some(1), "limit {limit}: {stderr}");
@@ -659,6 +644,81 @@ fn a_full_disk_leaves_every_previous_output_whole() {
             replaced, 0,
             "limit {limit}: a file of the earlier run was replaced"
         );
+    }
+    std::fs::remove_dir_all(&d).ok();
+}
+
+/// Runs `cmd` with every file it writes limited to `limit` bytes (`RLIMIT_FSIZE`, a full
+/// disk for each file), `SIGXFSZ` ignored so that the write fails with `EFBIG` instead.
+fn limit_file_size(cmd: &mut std::process::Command, limit: u64) {
+    // SAFETY: `pre_exec` runs in the child between fork and exec; the closure only calls
+    // the async-signal-safe `signal` and `setrlimit`.
+    unsafe {
+        use std::os::unix::process::CommandExt;
+        cmd.pre_exec(move || {
+            if libc::signal(libc::SIGXFSZ, libc::SIG_IGN) == libc::SIG_ERR {
+                return Err(std::io::Error::last_os_error());
+            }
+            let lim = libc::rlimit {
+                rlim_cur: limit,
+                rlim_max: limit,
+            };
+            if libc::setrlimit(libc::RLIMIT_FSIZE, &lim) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+}
+
+/// A recording that cannot be written whole (a full disk during `--rrd`, the outputs
+/// themselves fitting) is an error naming the recording, exit 1, and the outputs are whole.
+#[test]
+fn a_full_disk_during_the_recording_is_an_error() {
+    let d = common::tmp_dir("bad-input", "rrd-fsize");
+    let tracks = d.join("tracks.csv");
+    std::fs::write(&tracks, toy_house()).unwrap();
+    let reconstruct = |out: &str, rrd: &str| {
+        let mut cmd = bin();
+        cmd.arg("reconstruct")
+            .arg(&tracks)
+            .arg("--out")
+            .arg(d.join(out))
+            .arg("--rrd")
+            .arg(d.join(rrd))
+            .args(["--camera", "scaled-orthographic"]);
+        cmd
+    };
+    run_ok(&mut reconstruct("full", "full.rrd"));
+    let outputs = snapshot(&d.join("full"));
+    let largest = outputs.values().map(|b| b.len() as u64).max().unwrap();
+    let rrd = std::fs::metadata(d.join("full.rrd")).unwrap().len();
+    assert!(
+        rrd > 2 * largest,
+        "recording {rrd} bytes, largest output {largest}"
+    );
+    // Room for every output, not for the recording.
+    let mut cmd = reconstruct("cut", "cut.rrd");
+    limit_file_size(&mut cmd, (largest + rrd) / 2);
+    let run = cmd.output().unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("the recording to") && stderr.contains("was not completed"),
+        "{stderr}"
+    );
+    let cut = snapshot(&d.join("cut"));
+    assert_eq!(
+        cut.keys().collect::<Vec<_>>(),
+        outputs.keys().collect::<Vec<_>>()
+    );
+    for (k, v) in &cut {
+        if k.extension().is_some_and(|e| e == "json") {
+            serde_json::from_slice::<serde_json::Value>(v)
+                .unwrap_or_else(|e| panic!("{}: not whole JSON: {e}", k.display()));
+        } else {
+            assert_eq!(v.len(), outputs[k].len(), "{}", k.display());
+        }
     }
     std::fs::remove_dir_all(&d).ok();
 }
