@@ -240,6 +240,14 @@ const CASES: &[Case] = &[
         message: "200 points fitted, RMS 0.480805 px",
     },
     Case {
+        name: "two blocks joined by one track (toy house split in frames 0..15 and 15..30)",
+        file: "weak.csv",
+        input: Input::Gen(toy_house_weak),
+        args: RECONSTRUCT,
+        code: 0,
+        message: "joined to the main block by only 1 track(s)",
+    },
+    Case {
         name: "--rrd is the input",
         file: "tracks.csv",
         input: Input::Gen(toy_house),
@@ -475,6 +483,22 @@ fn toy_house_far() -> String {
         let v: Vec<&str> = l.split(',').collect();
         let (x, y): (f64, f64) = (v[2].parse().unwrap(), v[3].parse().unwrap());
         writeln!(s, "{},{},{:?},{:?}", v[0], v[1], x + 1e10, y + 1e10).unwrap();
+    }
+    s
+}
+
+/// The toy house cut in two blocks, frames 0..15 seeing tracks 0..100 and frames 15..30
+/// tracks 100..200, joined by one observation (track 0 in frame 15).
+fn toy_house_weak() -> String {
+    let text = toy_house();
+    let mut lines = text.lines();
+    let mut s = format!("{}\n", lines.next().unwrap());
+    for l in lines {
+        let v: Vec<&str> = l.split(',').collect();
+        let (f, t): (usize, usize) = (v[0].parse().unwrap(), v[1].parse().unwrap());
+        if (f < 15) == (t < 100) || (t == 0 && f == 15) {
+            writeln!(s, "{l}").unwrap();
+        }
     }
     s
 }
