@@ -49,23 +49,16 @@ pub(crate) fn write_file(
 }
 
 /// Writes `path` with `body` through a temporary file renamed into place (see the module
-/// documentation). Errors name `path`, also when writing its temporary file failed (a full
-/// disk, a file-size limit): the user asked for `path`, not for the temporary name.
+/// documentation): a [`FileSet`] of one. Errors name `path`, also when writing its
+/// temporary file failed (a full disk, a file-size limit): the user asked for `path`, not
+/// for the temporary name.
 pub fn write_with(
     path: &Path,
     body: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 ) -> Result<()> {
-    let tmp = temp_for(path);
-    let done = write_file(&tmp, body)
-        .map_err(|e| match e {
-            Error::Io { source, .. } => Error::io(path, source),
-            e => e,
-        })
-        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e)));
-    if done.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    done
+    let mut set = FileSet::new();
+    set.add_with(path, body)?;
+    set.commit()
 }
 
 /// [`write_with`] for bytes already in memory.
@@ -92,8 +85,17 @@ impl FileSet {
 
     /// Writes `bytes` to a temporary file beside `path`. Errors name `path`.
     pub fn add(&mut self, path: &Path, bytes: impl AsRef<[u8]>) -> Result<()> {
+        self.add_with(path, |w| std::io::Write::write_all(w, bytes.as_ref()))
+    }
+
+    /// Writes a temporary file beside `path` with `body`. Errors name `path`.
+    pub fn add_with(
+        &mut self,
+        path: &Path,
+        body: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+    ) -> Result<()> {
         let tmp = temp_for(path);
-        match write_file(&tmp, |w| std::io::Write::write_all(w, bytes.as_ref())) {
+        match write_file(&tmp, body) {
             Ok(()) => {
                 self.staged.push((tmp, path.to_path_buf()));
                 Ok(())
@@ -108,9 +110,11 @@ impl FileSet {
         }
     }
 
-    /// Renames every staged file into place, in the order added.
+    /// Renames every staged file into place, in the order added. When a rename fails, the
+    /// files not renamed yet are removed (by `Drop`).
     pub fn commit(mut self) -> Result<()> {
-        for (tmp, dest) in std::mem::take(&mut self.staged) {
+        while !self.staged.is_empty() {
+            let (tmp, dest) = self.staged.remove(0);
             if let Err(e) = std::fs::rename(&tmp, &dest) {
                 let _ = std::fs::remove_file(&tmp);
                 return Err(Error::io(&dest, e));

@@ -85,7 +85,7 @@ use std::str::FromStr;
 
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 
-use crate::atomic::{temp_path, write_file};
+use crate::atomic::FileSet;
 use crate::{Error, Result};
 
 /// Add this to both coordinates of a keypoint or principal point in rank3's tracker
@@ -306,31 +306,12 @@ impl ColmapModel {
             (IMAGES_TXT, write_images),
             (POINTS3D_TXT, write_points),
         ];
-        let mut temps: Vec<(PathBuf, PathBuf)> = Vec::with_capacity(files.len());
-        let remove = |temps: &[(PathBuf, PathBuf)]| {
-            for (tmp, _) in temps {
-                let _ = std::fs::remove_file(tmp);
-            }
-        };
+        // One set: a file that cannot be written replaces none of them.
+        let mut set = FileSet::new();
         for (name, body) in files {
-            let tmp = temp_path(dir, name);
-            temps.push((tmp.clone(), dir.join(name)));
-            if let Err(e) = write_file(&tmp, |w| body(self, w)) {
-                remove(&temps);
-                // Named by the file asked for, not its temporary name.
-                return Err(match e {
-                    Error::Io { source, .. } => Error::io(dir.join(name), source),
-                    e => e,
-                });
-            }
+            set.add_with(&dir.join(name), |w| body(self, w))?;
         }
-        for (k, (tmp, dest)) in temps.iter().enumerate() {
-            if let Err(e) = std::fs::rename(tmp, dest) {
-                remove(&temps[k..]);
-                return Err(Error::io(dest, e));
-            }
-        }
-        Ok(())
+        set.commit()
     }
 
     /// Reads `cameras.txt`, `images.txt` and `points3D.txt` from `dir`.
