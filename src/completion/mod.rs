@@ -571,17 +571,13 @@ impl CompletionProblem {
         }
         // Connectivity of the bipartite frame–track graph (union–find, frames 0..F, tracks F..).
         let mut parent: Vec<usize> = (0..nf + np).collect();
-        fn find(parent: &mut [usize], mut a: usize) -> usize {
-            while parent[a] != a {
-                parent[a] = parent[parent[a]];
-                a = parent[a];
-            }
-            a
-        }
         for f in 0..nf {
             for p in 0..np {
                 if meas.visible[f * np + p] {
-                    let (a, b) = (find(&mut parent, f), find(&mut parent, nf + p));
+                    let (a, b) = (
+                        crate::table::find_root(&mut parent, f),
+                        crate::table::find_root(&mut parent, nf + p),
+                    );
                     if a != b {
                         parent[a] = b;
                     }
@@ -591,11 +587,11 @@ impl CompletionProblem {
         let mut comp_frames = vec![0usize; nf + np];
         let mut comp_tracks = vec![0usize; nf + np];
         for f in 0..nf {
-            let r = find(&mut parent, f);
+            let r = crate::table::find_root(&mut parent, f);
             comp_frames[r] += 1;
         }
         for p in 0..np {
-            let r = find(&mut parent, nf + p);
+            let r = crate::table::find_root(&mut parent, nf + p);
             comp_tracks[r] += 1;
         }
         let roots: Vec<usize> = (0..nf + np)

@@ -147,6 +147,15 @@ pub enum SetAsideKind {
     Frame,
 }
 
+/// The root of `a` in the union–find forest `parent` (path halving).
+pub(crate) fn find_root(parent: &mut [usize], mut a: usize) -> usize {
+    while parent[a] != a {
+        parent[a] = parent[parent[a]];
+        a = parent[a];
+    }
+    a
+}
+
 /// Fewer distinct tracks than this joining a block of frames to the main one is a weak join:
 /// the block's frames are set aside ([`TrackTable::set_aside`]).
 pub const MIN_SHARED_TRACKS: usize = 4;
@@ -711,15 +720,8 @@ impl TrackTable {
     ) -> bool {
         let (nf, nt) = (self.n_frames(), self.n_tracks());
         let mut parent: Vec<usize> = (0..nf).collect();
-        fn find(parent: &mut [usize], mut a: usize) -> usize {
-            while parent[a] != a {
-                parent[a] = parent[parent[a]];
-                a = parent[a];
-            }
-            a
-        }
         fn union(parent: &mut [usize], a: usize, b: usize) -> bool {
-            let (a, b) = (find(parent, a), find(parent, b));
+            let (a, b) = (find_root(parent, a), find_root(parent, b));
             if a == b {
                 return false;
             }
@@ -763,7 +765,7 @@ impl TrackTable {
             for fr in &frames_of {
                 roots.clear();
                 for &f in fr {
-                    let r = find(parent, f as usize);
+                    let r = find_root(parent, f as usize);
                     if !roots.contains(&r) {
                         roots.push(r);
                         if roots.len() == 16 {
@@ -801,20 +803,20 @@ impl TrackTable {
         let mut obs = vec![0usize; nf];
         for fr in &frames_of {
             for &f in fr {
-                let r = find(&mut parent, f as usize);
+                let r = find_root(&mut parent, f as usize);
                 obs[r] += 1;
             }
         }
         let Some(main) = (0..nf).filter(|&f| keep_f[f]).max_by_key(|&f| obs[f]) else {
             return false;
         };
-        let main = find(&mut parent, main);
+        let main = find_root(&mut parent, main);
         let (counts, _) = block_pairs(&mut parent);
         let mut changed = false;
         let mut block_frames: std::collections::BTreeMap<usize, Vec<usize>> =
             std::collections::BTreeMap::new();
         for f in (0..nf).filter(|&f| keep_f[f]) {
-            let r = find(&mut parent, f);
+            let r = find_root(&mut parent, f);
             if r != main {
                 block_frames.entry(r).or_default().push(f);
             }
@@ -855,20 +857,13 @@ impl TrackTable {
         tracks.iter().for_each(|&p| in_t[p] = true);
         // Nodes: frames 0..nf, tracks nf..nf+nt.
         let mut parent: Vec<usize> = (0..nf + nt).collect();
-        fn find(parent: &mut [usize], mut a: usize) -> usize {
-            while parent[a] != a {
-                parent[a] = parent[parent[a]];
-                a = parent[a];
-            }
-            a
-        }
         let mut seen_t = vec![false; nt];
         for &f in frames {
             for e in &self.rows[f] {
                 let p = e.track as usize;
                 if in_t[p] {
                     seen_t[p] = true;
-                    let (a, b) = (find(&mut parent, f), find(&mut parent, nf + p));
+                    let (a, b) = (find_root(&mut parent, f), find_root(&mut parent, nf + p));
                     if a != b {
                         // The smaller root (a frame when one is present) represents.
                         let (lo, hi) = if a < b { (a, b) } else { (b, a) };
@@ -880,7 +875,7 @@ impl TrackTable {
         let mut comp_of_root = vec![usize::MAX; nf + nt];
         let mut comps: Vec<(Vec<usize>, Vec<usize>)> = Vec::new();
         for &f in frames {
-            let r = find(&mut parent, f);
+            let r = find_root(&mut parent, f);
             if comp_of_root[r] == usize::MAX {
                 comp_of_root[r] = comps.len();
                 comps.push((Vec::new(), Vec::new()));
@@ -889,7 +884,7 @@ impl TrackTable {
         }
         for &p in tracks {
             if seen_t[p] {
-                let r = find(&mut parent, nf + p);
+                let r = find_root(&mut parent, nf + p);
                 comps[comp_of_root[r]].1.push(p);
             }
         }
