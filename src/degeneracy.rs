@@ -719,18 +719,11 @@ fn px(v: f64) -> String {
     }
 }
 
+/// The median of the values that are not NaN ([`crate::eval::median`]); `None` when none
+/// is left.
 fn median(mut v: Vec<f64>) -> Option<f64> {
     v.retain(|x| !x.is_nan());
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    })
+    (!v.is_empty()).then(|| crate::eval::median(&v))
 }
 
 #[cfg(test)]

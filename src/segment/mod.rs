@@ -1101,6 +1101,12 @@ fn best_matching(conf: &[Vec<usize>], kf: usize, kt: usize) -> usize {
     rec(0, 0, conf, kf, kt)
 }
 
+/// Degrees of freedom of a track's fit, `ν = 2k − 3` for `k` frames kept (3 affine
+/// coordinates estimated).
+fn fit_dof(o: &crate::robust::subspace::TrackFit) -> f64 {
+    (2.0 * o.kept as f64 - 3.0).max(0.0)
+}
+
 /// Other rigid objects among `candidates` (track indices into `meas`, e.g. the tracks a
 /// robust pass rejected or flagged), given the main body's subspace `main`: the groups of
 /// [`segment`] run on the candidates alone that their own subspace explains better than
@@ -1164,7 +1170,7 @@ pub fn other_objects<R: Rng + ?Sized>(
             let Some(o) = ts.track_fit(&g.model, c) else {
                 continue;
             };
-            let nu = (2.0 * o.kept as f64 - 3.0).max(0.0);
+            let nu = fit_dof(&o);
             let own = (o.rms * o.rms).max(1e-24);
             dof += nu;
             rss_own += nu * own;
@@ -1208,8 +1214,7 @@ pub fn other_objects<R: Rng + ?Sized>(
                 let Some(o) = all.track_fit(model, p) else {
                     continue;
                 };
-                let nu = (2.0 * o.kept as f64 - 3.0).max(0.0);
-                let lr = nu * (m.rms * m.rms / (o.rms * o.rms).max(1e-24)).ln();
+                let lr = fit_dof(&o) * (m.rms * m.rms / (o.rms * o.rms).max(1e-24)).ln();
                 if lr > 2.0 * ln_n && best.is_none_or(|(_, b)| lr > b) {
                     best = Some((k, lr));
                 }
