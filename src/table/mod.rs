@@ -787,7 +787,8 @@ impl TrackTable {
         let enough = |c: usize, a: usize, b: usize, tracks_in: &[usize]| {
             c >= MIN_SHARED_TRACKS.min(tracks_in[a]).min(tracks_in[b])
         };
-        loop {
+        // The pair counts of the final blocks (the round that merged nothing).
+        let counts = loop {
             let (counts, tracks_in) = block_pairs(&mut parent);
             let mut merged = false;
             for (&(a, b), &c) in &counts {
@@ -796,9 +797,9 @@ impl TrackTable {
                 }
             }
             if !merged {
-                break;
+                break counts;
             }
-        }
+        };
         // The main block: the most observations.
         let mut obs = vec![0usize; nf];
         for fr in &frames_of {
@@ -811,7 +812,6 @@ impl TrackTable {
             return false;
         };
         let main = find_root(&mut parent, main);
-        let (counts, _) = block_pairs(&mut parent);
         let mut changed = false;
         let mut block_frames: std::collections::BTreeMap<usize, Vec<usize>> =
             std::collections::BTreeMap::new();
