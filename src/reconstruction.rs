@@ -2712,15 +2712,14 @@ fn restore_image_origin(rec: &mut Reconstruction, origin: [f64; 2], pp_from_imag
         }
     }
     if let Some(pr) = &mut rec.projective {
+        // The table's coordinates are the input's minus `origin`: a normalization of scale 1.
+        let shift = projective::Normalization {
+            centre: origin,
+            scale: 1.0,
+        };
         for c in &mut pr.model.cameras {
-            for k in 0..4 {
-                c[k] += origin[0] * c[8 + k];
-                c[4 + k] += origin[1] * c[8 + k];
-            }
-            let norm = c.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if norm > 0.0 && norm.is_finite() {
-                c.iter_mut().for_each(|v| *v /= norm);
-            }
+            *c = shift.camera_to_pixels(c);
+            projective::bundle::normalize(c);
         }
         if pr.cameras.len() == pr.model.cameras.len() {
             for (f, cam) in pr.cameras.iter_mut().enumerate() {
