@@ -76,6 +76,7 @@ fn main() {
                 )
             })
             .collect(),
+        aspect: 1.0,
     };
     let mut w = truth.predict();
     for r in 0..2 * nf {

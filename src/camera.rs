@@ -86,7 +86,7 @@ impl std::fmt::Display for CameraModel {
 /// Per-frame metric cameras and per-track 3D points.
 ///
 /// Projection of point `p` in frame `f`:
-/// `[x, y] = scales[f] · rotations[f][rows 0..2] · points[p] + translations[f]`.
+/// `[x, y] = diag(aspect, 1) · scales[f] · rotations[f][rows 0..2] · points[p] + translations[f]`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MetricModel {
     pub rotations: Vec<Rotation3<f64>>,
@@ -94,6 +94,10 @@ pub struct MetricModel {
     /// All ones for the orthographic model.
     pub scales: Vec<f64>,
     pub points: Vec<Vector3<f64>>,
+    /// Aspect ratio `f_x / f_y` of the pixels (1: square): the x row of every camera is
+    /// multiplied by it. The solvers work in square pixels (1); a reconstruction of
+    /// non-square pixels ([`crate::Config::aspect_ratio`]) carries it.
+    pub aspect: f64,
 }
 
 impl MetricModel {
@@ -114,7 +118,7 @@ impl MetricModel {
         let x = &self.points[p];
         let s = self.scales[f];
         Vector2::new(
-            s * (r[(0, 0)] * x[0] + r[(0, 1)] * x[1] + r[(0, 2)] * x[2]),
+            self.aspect * s * (r[(0, 0)] * x[0] + r[(0, 1)] * x[1] + r[(0, 2)] * x[2]),
             s * (r[(1, 0)] * x[0] + r[(1, 1)] * x[1] + r[(1, 2)] * x[2]),
         ) + self.translations[f]
     }
@@ -165,7 +169,7 @@ impl MetricModel {
     }
 
     /// Adds frame `f`'s observation `w` of a point to its triangulation normal equations
-    /// `Σ aaᵀ x = Σ a b` (`a = s R[row]`, `b = w[row] − t[row]`).
+    /// `Σ aaᵀ x = Σ a b` (`a = s R[row]`, times `aspect` on the x row, `b = w[row] − t[row]`).
     #[inline]
     pub fn accumulate(
         &self,
@@ -177,7 +181,8 @@ impl MetricModel {
         let r = self.rotations[f].matrix();
         let s = self.scales[f];
         for row in 0..2 {
-            let a = Vector3::new(r[(row, 0)], r[(row, 1)], r[(row, 2)]) * s;
+            let sr = if row == 0 { s * self.aspect } else { s };
+            let a = Vector3::new(r[(row, 0)], r[(row, 1)], r[(row, 2)]) * sr;
             *ata += a * a.transpose();
             *atb += a * (w[row] - self.translations[f][row]);
         }

@@ -122,6 +122,19 @@ pub enum ColmapCameraModel {
     /// `SIMPLE_RADIAL`: one focal length, the principal point and one radial distortion
     /// coefficient `k` on normalized coordinates (`u' = u (1 + k r²)`).
     SimpleRadial { f: f64, cx: f64, cy: f64, k: f64 },
+    /// `OPENCV`: focal lengths along x and y, the principal point, radial `k1`, `k2` and
+    /// tangential `p1`, `p2` on normalized coordinates (rank3 writes it for non-square
+    /// pixels with `k₁`; its `k2`, `p1`, `p2` are 0).
+    Opencv {
+        fx: f64,
+        fy: f64,
+        cx: f64,
+        cy: f64,
+        k1: f64,
+        k2: f64,
+        p1: f64,
+        p2: f64,
+    },
 }
 
 impl ColmapCameraModel {
@@ -131,6 +144,7 @@ impl ColmapCameraModel {
             Self::SimplePinhole { .. } => "SIMPLE_PINHOLE",
             Self::Pinhole { .. } => "PINHOLE",
             Self::SimpleRadial { .. } => "SIMPLE_RADIAL",
+            Self::Opencv { .. } => "OPENCV",
         }
     }
 
@@ -140,6 +154,16 @@ impl ColmapCameraModel {
             Self::SimplePinhole { f, cx, cy } => vec![f, cx, cy],
             Self::Pinhole { fx, fy, cx, cy } => vec![fx, fy, cx, cy],
             Self::SimpleRadial { f, cx, cy, k } => vec![f, cx, cy, k],
+            Self::Opencv {
+                fx,
+                fy,
+                cx,
+                cy,
+                k1,
+                k2,
+                p1,
+                p2,
+            } => vec![fx, fy, cx, cy, k1, k2, p1, p2],
         }
     }
 
@@ -153,6 +177,7 @@ impl ColmapCameraModel {
             "SIMPLE_PINHOLE" => Some(&["f", "cx", "cy"]),
             "PINHOLE" => Some(&["fx", "fy", "cx", "cy"]),
             "SIMPLE_RADIAL" => Some(&["f", "cx", "cy", "k"]),
+            "OPENCV" => Some(&["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"]),
             _ => None,
         }
     }
@@ -164,6 +189,16 @@ impl ColmapCameraModel {
             ("SIMPLE_PINHOLE", &[f, cx, cy]) => Ok(Self::SimplePinhole { f, cx, cy }),
             ("PINHOLE", &[fx, fy, cx, cy]) => Ok(Self::Pinhole { fx, fy, cx, cy }),
             ("SIMPLE_RADIAL", &[f, cx, cy, k]) => Ok(Self::SimpleRadial { f, cx, cy, k }),
+            ("OPENCV", &[fx, fy, cx, cy, k1, k2, p1, p2]) => Ok(Self::Opencv {
+                fx,
+                fy,
+                cx,
+                cy,
+                k1,
+                k2,
+                p1,
+                p2,
+            }),
             _ => Err(match Self::names_of(model) {
                 None => unsupported(model),
                 Some(names) => (
@@ -184,8 +219,8 @@ fn unsupported(model: &str) -> (String, String) {
     (
         "MODEL".into(),
         format!(
-            "camera model `{model}` is not supported (rank3 reads SIMPLE_PINHOLE, PINHOLE and \
-             SIMPLE_RADIAL)"
+            "camera model `{model}` is not supported (rank3 reads SIMPLE_PINHOLE, PINHOLE, \
+             SIMPLE_RADIAL and OPENCV)"
         ),
     )
 }
@@ -1598,7 +1633,7 @@ mod tests {
         let c = CAMERAS_TXT;
         // Lines 1-3 are comments; camera 1 is line 4, camera 7 line 5, camera 3 line 6.
         expect(
-            parse_error("c-model", c, 5, "7 OPENCV 800 600 1 2 3 4 5 6 7 8"),
+            parse_error("c-model", c, 5, "7 OPENCV_FISHEYE 800 600 1 2 3 4 5 6 7 8"),
             c,
             5,
             "MODEL",

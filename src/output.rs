@@ -173,9 +173,29 @@ pub fn colmap_model(
             (mx.ceil() as u32, my.ceil() as u32)
         }
     };
+    let (cx, cy) = (m.principal_point[0] + OFF, m.principal_point[1] + OFF);
     let camera = |id: u32, f: f64| ColmapCamera {
         id,
-        model: if m.k1 != 0.0 {
+        // Non-square pixels: focal lengths `aspect · f` along x and `f` along y.
+        model: if m.aspect != 1.0 && m.k1 != 0.0 {
+            ColmapCameraModel::Opencv {
+                fx: m.aspect * f,
+                fy: f,
+                cx,
+                cy,
+                k1: m.k1,
+                k2: 0.0,
+                p1: 0.0,
+                p2: 0.0,
+            }
+        } else if m.aspect != 1.0 {
+            ColmapCameraModel::Pinhole {
+                fx: m.aspect * f,
+                fy: f,
+                cx,
+                cy,
+            }
+        } else if m.k1 != 0.0 {
             ColmapCameraModel::SimpleRadial {
                 f,
                 cx: m.principal_point[0] + OFF,

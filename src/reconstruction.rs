@@ -84,6 +84,15 @@ pub struct Config {
     pub rank3_warning_ratio: f64,
     /// Warn "close to rank 2" when σ3/σ2 is below this. Default 0.05.
     pub rank2_warning_ratio: f64,
+    /// Known aspect ratio of the pixels, `f_x / f_y` (the width of a pixel's image of a
+    /// unit square over its height; 1 = square pixels). Video digitised from a 4:3 picture
+    /// at 512×480 has 0.8, NTSC DV (720×480) 0.9 (10:11 sample aspect ratio). The
+    /// pipeline divides the image's x coordinates by it (about the observations'
+    /// centroid) so that every camera model works in square pixels, and multiplies the
+    /// results back: [`Reconstruction::aspect_ratio`]. Residuals and RMS values are then
+    /// in square pixels the size of the pixel height. Default `None` (1).
+    #[serde(default)]
+    pub aspect_ratio: Option<f64>,
 }
 
 impl Default for Config {
@@ -114,6 +123,7 @@ impl Default for Config {
             sparse: crate::sparse::SparseConfig::default(),
             rank3_warning_ratio: 0.1,
             rank2_warning_ratio: 0.05,
+            aspect_ratio: None,
         }
     }
 }
@@ -492,6 +502,10 @@ pub struct PerspectiveIntrinsics {
     pub principal_point_source: &'static str,
     /// Radial distortion `k₁` of normalised coordinates (0 when not estimated).
     pub k1: f64,
+    /// Aspect ratio `f_x / f_y` (1: square pixels); `K₀₀ = aspect_ratio · focal_px`.
+    pub aspect_ratio: f64,
+    /// `"square pixels"`, `"given"` ([`Config::aspect_ratio`]) or `"estimated"`.
+    pub aspect_ratio_source: &'static str,
     pub image_size: Option<[u32; 2]>,
 }
 
@@ -623,6 +637,12 @@ impl PerspectiveResult {
                 pf.assumed.principal_point_source
             },
             k1: model.k1,
+            aspect_ratio: model.aspect,
+            aspect_ratio_source: if cfg.estimate_aspect_ratio {
+                "estimated"
+            } else {
+                "square pixels"
+            },
             image_size: cfg.intrinsics.image_size,
         };
         Self {
@@ -1003,6 +1023,11 @@ pub struct Reconstruction {
     /// Present when a textured surface was built ([`crate::mesh`]; `rank3 run`, or
     /// `reconstruct --images`): its triangulation, texture and timing report.
     pub mesh: Option<crate::mesh::MeshReport>,
+    /// Aspect ratio of the pixels, `f_x / f_y` ([`Config::aspect_ratio`]; 1 = square). The
+    /// affine-family cameras project `x = aspect_ratio · scale · rotation[0] · xyz +
+    /// translation[0]`, `y = scale · rotation[1] · xyz + translation[1]`; the perspective
+    /// intrinsics carry it too. Residuals are in square pixels of the pixel height.
+    pub aspect_ratio: f64,
     /// The metric model (kept frames × kept tracks), for library users.
     #[serde(skip)]
     pub model: MetricModel,
@@ -1118,7 +1143,11 @@ impl Reconstruction {
         warnings.extend(check.warnings);
         let origin = check.origin;
         kept_table.translate([-origin[0], -origin[1]]);
-        let (centred_config, pp_from_image_size) = centred_config(config, origin);
+        let aspect = config.aspect_ratio.unwrap_or(1.0);
+        if aspect != 1.0 {
+            kept_table.scale([1.0 / aspect, 1.0]);
+        }
+        let (centred_config, pp_from_image_size) = centred_config(config, origin, aspect);
         let config = centred_config.as_ref().unwrap_or(config);
         let kept = Kept {
             table: &kept_table,
@@ -1130,7 +1159,7 @@ impl Reconstruction {
         // Long or sparse tables take the sparse pipeline.
         if let Some(reason) = sparse_reason(&kept_table, config)? {
             let mut rec = sparse_reconstruction(table, kept, config, timer, reason, warnings)?;
-            restore_image_origin(&mut rec, origin, pp_from_image_size);
+            restore_image_frame(&mut rec, origin, aspect, pp_from_image_size);
             return Ok(rec);
         }
         // 2. Robust pass (affine): outlier tracks, gross entries, other rigid objects.
@@ -1179,7 +1208,7 @@ impl Reconstruction {
         let mut rec = assemble(
             table, kept, selection, fitted, outliers, choice, timer, warnings,
         );
-        restore_image_origin(&mut rec, origin, pp_from_image_size);
+        restore_image_frame(&mut rec, origin, aspect, pp_from_image_size);
         Ok(rec)
     }
 
@@ -1524,6 +1553,7 @@ impl OutlierTracks {
             translations: fitted.model.translations.clone(),
             scales: fitted.model.scales.clone(),
             points: vec![Vector3::repeat(f64::NAN); fitted.outlier_kept.len()],
+            aspect: fitted.model.aspect,
         };
         model.triangulate(&meas);
         OutlierTracks {
@@ -1804,6 +1834,7 @@ fn assemble(
         warnings,
         timings: timer.timings,
         mesh: None,
+        aspect_ratio: 1.0,
         sparse: None,
         model,
         affine_structure: affine.s_hat,
@@ -2466,6 +2497,14 @@ fn affine_points(meas: &Measurements, affine: &Affine) -> Mat<f64> {
 fn validate_config(c: &Config) -> Result<()> {
     c.projective.validate()?;
     c.perspective.validate()?;
+    if let Some(a) = c.aspect_ratio
+        && !(a.is_finite() && a > 0.0)
+    {
+        return Err(Error::InvalidConfig {
+            field: "aspect-ratio",
+            message: format!("must be a positive number, got {a}"),
+        });
+    }
     if c.min_frames_per_track < 2 {
         return Err(Error::InvalidConfig {
             field: "min_frames_per_track",
@@ -2590,6 +2629,7 @@ fn initial_model(
         translations,
         scales,
         points,
+        aspect: 1.0,
     };
     model.triangulate(meas);
     Ok(model)
@@ -2665,11 +2705,12 @@ struct Kept<'a> {
     origin: [f64; 2],
 }
 
-/// `config` with the principal point in the coordinates of a table moved by `−origin`:
-/// a given principal point is moved with it, and the image centre of a given image size is
-/// given explicitly (the second value says so, for [`restore_image_origin`] to name its
-/// source again). `None` when no setting depends on the image origin.
-fn centred_config(config: &Config, origin: [f64; 2]) -> (Option<Config>, bool) {
+/// `config` with the principal point in the coordinates of a table moved by `−origin` and
+/// whose x axis is divided by `aspect`: a given principal point is moved with it, and the
+/// image centre of a given image size is given explicitly (the second value says so, for
+/// [`restore_image_frame`] to name its source again). `None` when no setting depends on the
+/// image origin.
+fn centred_config(config: &Config, origin: [f64; 2], aspect: f64) -> (Option<Config>, bool) {
     let k = &config.perspective.intrinsics;
     let (pp, from_size) = match (k.principal_point, k.image_size) {
         (Some(c), _) => (c, false),
@@ -2678,16 +2719,27 @@ fn centred_config(config: &Config, origin: [f64; 2]) -> (Option<Config>, bool) {
         (None, None) => return (None, false),
     };
     let mut c = config.clone();
-    c.perspective.intrinsics.principal_point = Some([pp[0] - origin[0], pp[1] - origin[1]]);
+    c.perspective.intrinsics.principal_point =
+        Some([(pp[0] - origin[0]) / aspect, pp[1] - origin[1]]);
     (Some(c), from_size)
 }
 
-/// Moves a reconstruction computed on a table translated by `−origin` back to the input's
-/// image coordinates: the cameras' translations, the affine predictions, the projective
-/// cameras (`P ← [I₂ origin; 0 1] P`, renormalised to unit Frobenius norm) and the
-/// perspective principal point. Everything else (rotations, scales, points, residuals) does
-/// not depend on the image origin. `O(F·N)` for the predictions.
-fn restore_image_origin(rec: &mut Reconstruction, origin: [f64; 2], pp_from_image_size: bool) {
+/// Moves a reconstruction computed on a table translated by `−origin`, its x axis then
+/// divided by `aspect`, back to the input's image coordinates (`x ← aspect·x + origin`):
+/// the cameras' translations and x rows, the affine predictions, the projective cameras
+/// (`P ← [diag(aspect, 1) origin; 0 1] P`, renormalised to unit Frobenius norm) and the
+/// perspective intrinsics. Rotations, scales, points and residuals do not depend on the
+/// image frame (residuals stay in square pixels). `O(F·N)` for the predictions.
+fn restore_image_frame(
+    rec: &mut Reconstruction,
+    origin: [f64; 2],
+    aspect: f64,
+    pp_from_image_size: bool,
+) {
+    rec.aspect_ratio = aspect;
+    if aspect != 1.0 {
+        restore_aspect(rec, aspect);
+    }
     if origin == [0.0, 0.0] {
         return;
     }
@@ -2735,6 +2787,48 @@ fn restore_image_origin(rec: &mut Reconstruction, origin: [f64; 2], pp_from_imag
         }
         if pp_from_image_size && pe.intrinsics.principal_point_source == "given" {
             pe.intrinsics.principal_point_source = "image centre";
+        }
+    }
+}
+
+/// Multiplies a reconstruction's image x axis by `aspect` (the first half of
+/// [`restore_image_frame`]).
+fn restore_aspect(rec: &mut Reconstruction, aspect: f64) {
+    for f in &mut rec.frames {
+        f.translation[0] *= aspect;
+    }
+    for m in [&mut rec.model, &mut rec.outlier_model] {
+        m.aspect *= aspect;
+        m.translations.iter_mut().for_each(|t| t[0] *= aspect);
+    }
+    for m in [&mut rec.affine_prediction, &mut rec.outlier_prediction] {
+        for j in 0..m.ncols() {
+            for r in (0..m.nrows()).step_by(2) {
+                m[(r, j)] *= aspect;
+            }
+        }
+    }
+    if let Some(pr) = &mut rec.projective {
+        for c in &mut pr.model.cameras {
+            c[..4].iter_mut().for_each(|v| *v *= aspect);
+            projective::bundle::normalize(c);
+        }
+        if pr.cameras.len() == pr.model.cameras.len() {
+            for (f, cam) in pr.cameras.iter_mut().enumerate() {
+                cam.p = pr.model.camera_matrix(f);
+            }
+        }
+    }
+    if let Some(pe) = &mut rec.perspective {
+        pe.model.aspect *= aspect;
+        pe.model.principal_point[0] *= aspect;
+        let k = &mut pe.intrinsics;
+        k.aspect_ratio *= aspect;
+        k.principal_point[0] *= aspect;
+        k.k[0][0] *= aspect;
+        k.k[0][2] *= aspect;
+        if k.aspect_ratio_source == "square pixels" {
+            k.aspect_ratio_source = "given";
         }
     }
 }
@@ -2956,6 +3050,7 @@ fn sparse_reconstruction(
         translations: all.translations.clone(),
         scales: all.scales.clone(),
         points: v.iter().map(|&p| all.points[p]).collect(),
+        aspect: all.aspect,
     };
     let model = pick(&inl);
     let outlier_model = pick(&out);
@@ -2997,6 +3092,7 @@ fn sparse_reconstruction(
         warnings,
         timings: timer.timings,
         mesh: None,
+        aspect_ratio: 1.0,
         sparse: Some(crate::sparse::SparseReport {
             reason,
             observations: prob.graph.n_obs(),

@@ -219,6 +219,13 @@ pub struct ReconstructionFile {
     pub sparse: Option<serde_json::Value>,
     /// The textured mesh's report (layout: `docs/formats.md`), kept as JSON.
     pub mesh: Option<serde_json::Value>,
+    /// Aspect ratio of the pixels, `f_x / f_y` (1 in files written before it existed).
+    #[serde(default = "one")]
+    pub aspect_ratio: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 impl ReconstructionFile {
@@ -460,7 +467,17 @@ pub struct IntrinsicsRecord {
     pub principal_point_source: String,
     #[serde(deserialize_with = "nullable")]
     pub k1: f64,
+    /// `f_x / f_y` (1 in files written before it existed).
+    #[serde(default = "one")]
+    pub aspect_ratio: f64,
+    /// `"square pixels"`, `"given"` or `"estimated"`.
+    #[serde(default = "square_pixels")]
+    pub aspect_ratio_source: String,
     pub image_size: Option<[u32; 2]>,
+}
+
+fn square_pixels() -> String {
+    "square pixels".into()
 }
 
 /// `perspective.self_calibration`.

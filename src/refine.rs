@@ -230,6 +230,16 @@ fn validate(meas: &Measurements, model: &MetricModel, cfg: &RefineConfig) -> Res
         expected: expected.to_string(),
         got: got.to_string(),
     };
+    if model.aspect != 1.0 {
+        return Err(Error::InvalidConfig {
+            field: "aspect",
+            message: format!(
+                "the refinement works in square pixels (aspect 1), got {}: divide the \
+                 measurements' x by the aspect ratio first (Config::aspect_ratio does)",
+                model.aspect
+            ),
+        });
+    }
     if model.rotations.len() != f {
         return Err(dim(
             "refine: model rotations vs. measurement frames",
@@ -881,6 +891,7 @@ mod tests {
             translations,
             scales,
             points,
+            aspect: 1.0,
         }
     }
 

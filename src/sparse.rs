@@ -550,6 +550,7 @@ impl SparseProblem {
             points: (0..np)
                 .map(|p| Vector3::new(pts[3 * p], pts[3 * p + 1], pts[3 * p + 2]))
                 .collect(),
+            aspect: 1.0,
         }
     }
 
@@ -627,6 +628,7 @@ impl MetricWindow {
                 .collect(),
             scales: self.cameras.iter().map(|c| c.1).collect(),
             points: self.points.clone(),
+            aspect: 1.0,
         }
     }
 }

@@ -766,6 +766,7 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthScene> {
         translations,
         scales,
         points,
+        aspect: 1.0,
     };
     let imaging = match &perspective {
         Some(pt) => Imaging::Perspective(pt),
@@ -1696,6 +1697,7 @@ pub fn corridor(cfg: &CorridorConfig) -> Result<(TrackTable, MetricModel)> {
             translations,
             scales,
             points: pts,
+            aspect: 1.0,
         },
     ))
 }

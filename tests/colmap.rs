@@ -117,6 +117,22 @@ fn project(model: &ColmapCameraModel, x_cam: &Vector3<f64>) -> [f64; 2] {
             let radial = 1.0 + k * (u * u + v * v);
             [f * u * radial + cx, f * v * radial + cy]
         }
+        ColmapCameraModel::Opencv {
+            fx,
+            fy,
+            cx,
+            cy,
+            k1,
+            k2,
+            p1,
+            p2,
+        } => {
+            let r2 = u * u + v * v;
+            let radial = 1.0 + k1 * r2 + k2 * r2 * r2;
+            let du = radial * u + 2.0 * p1 * u * v + p2 * (r2 + 2.0 * u * u);
+            let dv = radial * v + p1 * (r2 + 2.0 * v * v) + 2.0 * p2 * u * v;
+            [fx * du + cx, fy * dv + cy]
+        }
     }
 }
 

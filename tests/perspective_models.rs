@@ -81,6 +81,7 @@ fn floor(s: &SynthScene, pc: &PerspectiveConfig) -> (Vec<f64>, f64) {
         focal_px: t.intrinsics.iter().map(|k| k[(0, 0)]).collect(),
         principal_point: [t.intrinsics[0][(0, 2)], t.intrinsics[0][(1, 2)]],
         k1: t.k1,
+        aspect: 1.0,
         rotations: t.rotations.iter().map(|r| *r.matrix()).collect(),
         translations: t.translations.clone(),
         points: s.truth.points.clone(),

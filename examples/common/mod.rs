@@ -77,6 +77,7 @@ pub fn truth_model(s: &rank3::synth::SynthScene) -> rank3::perspective::Perspect
         focal_px: t.intrinsics.iter().map(|k| k[(0, 0)]).collect(),
         principal_point: [t.intrinsics[0][(0, 2)], t.intrinsics[0][(1, 2)]],
         k1: t.k1,
+        aspect: 1.0,
         rotations: t.rotations.iter().map(|r| *r.matrix()).collect(),
         translations: t.translations.clone(),
         points: s.truth.points.clone(),

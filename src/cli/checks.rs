@@ -101,6 +101,7 @@ fn perspective_only(m: &ArgMatches, camera: CameraArg) -> Option<String> {
             ("per_frame_focal", "--per-frame-focal"),
             ("estimate_principal_point", "--estimate-principal-point"),
             ("distortion", "--distortion"),
+            ("estimate_aspect_ratio", "--estimate-aspect-ratio"),
             ("loss", "--loss"),
             ("loss_scale", "--loss-scale"),
         ],

@@ -87,6 +87,10 @@ pub struct ReconstructOpts {
     /// Seed of every random choice (robust sampling, random starts, randomized SVD).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Aspect ratio of the pixels, fx/fy (1 = square; 0.8 for a 4:3 picture digitised at
+    /// 512×480, 0.9 for NTSC DV at 720×480): every camera model then works in square pixels.
+    #[arg(long, value_name = "R")]
+    pub aspect_ratio: Option<f64>,
     /// Perspective camera: the known focal length, pixels (default: self-calibrated).
     #[arg(long, value_name = "PX")]
     pub focal: Option<f64>,
@@ -106,6 +110,10 @@ pub struct ReconstructOpts {
     /// Perspective camera: estimate one radial distortion coefficient k1.
     #[arg(long)]
     pub distortion: bool,
+    /// Perspective camera: estimate the aspect ratio fx/fy (non-square pixels) in the
+    /// bundle adjustment.
+    #[arg(long)]
+    pub estimate_aspect_ratio: bool,
     /// Robust loss of the perspective bundle adjustment.
     #[arg(long, value_enum, default_value = "huber")]
     pub loss: LossArg,
@@ -154,6 +162,7 @@ impl ReconstructOpts {
             rc.ransac.threshold_px = Some(px);
         }
         config.metric.force_sdp = a.force_sdp;
+        config.aspect_ratio = a.aspect_ratio;
         if a.no_refine {
             config.refine = None;
         }
@@ -166,6 +175,7 @@ impl ReconstructOpts {
         p.per_frame_focal = a.per_frame_focal;
         p.estimate_principal_point = a.estimate_principal_point;
         p.distortion = a.distortion;
+        p.estimate_aspect_ratio = a.estimate_aspect_ratio;
         p.loss = match a.loss {
             LossArg::None => rank3::perspective::Loss::Squared,
             LossArg::Huber => rank3::perspective::Loss::Huber(a.loss_scale),
@@ -198,7 +208,7 @@ impl ReconstructOpts {
             if config.camera.is_perspective() {
                 let i = &config.perspective.intrinsics;
                 format!(
-                    "; perspective: focal {}, principal point {}, image size {}{}{}{}, loss {:?}",
+                    "; perspective: focal {}, principal point {}, image size {}{}{}{}{}, loss {:?}",
                     i.focal_px
                         .map_or("self-calibrated".to_string(), |f| format!("{f} px")),
                     i.principal_point
@@ -217,6 +227,11 @@ impl ReconstructOpts {
                     },
                     if self.distortion {
                         ", k1 estimated"
+                    } else {
+                        ""
+                    },
+                    if self.estimate_aspect_ratio {
+                        ", aspect ratio estimated"
                     } else {
                         ""
                     },

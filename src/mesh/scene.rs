@@ -22,7 +22,7 @@ use crate::{Error, Result, TrackTable};
 #[derive(Debug, Clone)]
 pub enum View {
     Affine {
-        /// `s·i` and `s·j`.
+        /// `aspect·s·i` and `s·j`.
         rows: [Vector3<f64>; 2],
         t: [f64; 2],
         /// The viewing direction `k = i × j` (unit).
@@ -31,9 +31,12 @@ pub enum View {
     Perspective {
         r: Matrix3<f64>,
         t: Vector3<f64>,
+        /// Focal length along y, pixels (along x: `aspect · focal`).
         focal: f64,
         principal_point: [f64; 2],
         k1: f64,
+        /// Aspect ratio `f_x / f_y` of the pixels.
+        aspect: f64,
     },
     Projective {
         p: Matrix3x4<f64>,
@@ -103,6 +106,7 @@ impl Scene {
                     focal: c.focal_px,
                     principal_point: per.intrinsics.principal_point,
                     k1: per.intrinsics.k1,
+                    aspect: per.intrinsics.aspect_ratio,
                 });
             }
             for q in &per.points {
@@ -118,7 +122,7 @@ impl Scene {
                 let k = i.cross(&j).normalize();
                 k_of.insert(f, k);
                 views[f] = Some(View::Affine {
-                    rows: [i * c.scale, j * c.scale],
+                    rows: [i * (c.scale * rec.aspect_ratio), j * c.scale],
                     t: c.translation,
                     k,
                 });
@@ -212,6 +216,7 @@ impl Scene {
                 focal,
                 principal_point: c,
                 k1,
+                aspect,
             } => {
                 let xc = r * x + t;
                 if xc[2] <= 0.0 {
@@ -219,7 +224,7 @@ impl Scene {
                 }
                 let (nx, ny) = (xc[0] / xc[2], xc[1] / xc[2]);
                 let d = 1.0 + k1 * (nx * nx + ny * ny);
-                Some([focal * d * nx + c[0], focal * d * ny + c[1]])
+                Some([aspect * focal * d * nx + c[0], focal * d * ny + c[1]])
             }
             View::Projective { .. } => None,
         }

@@ -72,6 +72,7 @@ fn scene_of(s: &Scene3d, cams: &[Pinhole], points: &[Vector3<f64>], inlier: &[bo
                     focal: c.focal,
                     principal_point: c.principal_point,
                     k1: 0.0,
+                    aspect: 1.0,
                 })
             })
             .collect(),

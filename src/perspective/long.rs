@@ -108,6 +108,7 @@ pub fn fit_observations(
         per_frame_focal: false,
         estimate_principal_point: false,
         distortion: false,
+        estimate_aspect_ratio: false,
         loss: match cfg.loss {
             Loss::Squared => Loss::Squared,
             Loss::Huber(d) => Loss::Huber(d / s),
@@ -170,6 +171,7 @@ pub fn fit_observations(
         focal_px: vec![focal * s; n_frames],
         principal_point: assumed.principal_point,
         k1: 0.0,
+        aspect: 1.0,
         rotations,
         translations,
         points,

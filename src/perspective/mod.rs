@@ -6,7 +6,8 @@
 //! `w_fp = π_f(X_p) = f_f (1 + k₁‖n‖²) n + c`, `n = dehom(R_f X_p + t_f)`: rotations `R_f`,
 //! translations `t_f`, points `X_p ∈ R³`, focal length `f_f` (one for the sequence, or one
 //! per frame for a zooming camera), principal point `c` and radial coefficient `k₁`
-//! (known, or estimated and shared by all frames). Zero skew and unit aspect ratio.
+//! (known, or estimated and shared by all frames), and the aspect ratio `f_x / f_y` (1, or
+//! estimated and shared: `π₁` is multiplied by it). Zero skew.
 //!
 //! # Objective
 //!
@@ -81,6 +82,12 @@ pub struct PerspectiveConfig {
     pub estimate_principal_point: bool,
     /// Estimate one radial distortion coefficient `k₁` (shared). Default false.
     pub distortion: bool,
+    /// Estimate the aspect ratio `f_x / f_y` (shared; non-square pixels, e.g. video
+    /// digitised at 512×480 or 720×480 from a 4:3 picture) in a final adjustment, from the
+    /// value of the start (1: square pixels). Default false. A known aspect ratio is
+    /// [`crate::Config::aspect_ratio`]: the pipeline rescales the image's x axis by it.
+    #[serde(default)]
+    pub estimate_aspect_ratio: bool,
     /// Robust loss of the metric bundle adjustment, in pixels. Default Huber, δ = 2 px.
     pub loss: Loss,
     /// Settings of the metric bundle adjustment. Default: variable projection (the points
@@ -116,6 +123,7 @@ impl Default for PerspectiveConfig {
             per_frame_focal: false,
             estimate_principal_point: false,
             distortion: false,
+            estimate_aspect_ratio: false,
             loss: Loss::Huber(2.0),
             bundle: LmConfig {
                 max_iterations: 200,
@@ -190,6 +198,9 @@ pub struct PerspectiveModel {
     pub principal_point: [f64; 2],
     /// Radial distortion coefficient `k₁` (of normalised coordinates; 0 = none).
     pub k1: f64,
+    /// Aspect ratio `f_x / f_y` (1 = square pixels): the focal length in x is
+    /// `aspect · focal_px`.
+    pub aspect: f64,
     /// World-to-camera rotations.
     pub rotations: Vec<Matrix3<f64>>,
     /// World-to-camera translations: `X_c = R X + t`.
@@ -206,7 +217,7 @@ impl PerspectiveModel {
         let d = 1.0 + self.k1 * (nx * nx + ny * ny);
         let fo = self.focal_px[f];
         [
-            fo * d * nx + self.principal_point[0],
+            self.aspect * fo * d * nx + self.principal_point[0],
             fo * d * ny + self.principal_point[1],
         ]
     }
@@ -225,7 +236,7 @@ impl PerspectiveModel {
     pub fn k(&self, f: usize) -> Matrix3<f64> {
         let fo = self.focal_px[f];
         Matrix3::new(
-            fo,
+            self.aspect * fo,
             0.0,
             self.principal_point[0],
             0.0,
@@ -459,6 +470,7 @@ pub fn fit(
             ..cfg.bundle.clone()
         },
         distortion: false,
+        estimate_aspect_ratio: false,
         ..cfg.clone()
     };
     // One graph for every start and the final adjustment (the same assumed frame).
@@ -542,6 +554,7 @@ fn selfcal_start(
         focal_px,
         principal_point: assumed.principal_point,
         k1: 0.0,
+        aspect: 1.0,
         rotations: up.rotations,
         translations: up.translations,
         points: up.points,
@@ -587,6 +600,7 @@ pub fn lift_affine(a: &MetricModel, f: f64, mirrored: bool, c: [f64; 2]) -> Pers
         focal_px: vec![f; nf],
         principal_point: c,
         k1: 0.0,
+        aspect: 1.0,
         rotations,
         translations,
         points,
@@ -681,6 +695,7 @@ fn adjust_graph(
         focal,
         principal_point: Some(pp0),
         k1: Some(start.k1),
+        aspect: Some(start.aspect),
     };
     let cl = metric.cam_len();
     let mut cams = vec![0.0; nf * cl];
@@ -701,7 +716,7 @@ fn adjust_graph(
         .iter()
         .flat_map(|x| [x[0], x[1], x[2]])
         .collect();
-    let mut glob = metric.glob(start.focal_px[0] / s, pp0, start.k1);
+    let mut glob = metric.glob(start.focal_px[0] / s, pp0, start.k1, start.aspect);
     let loss = match cfg.loss {
         Loss::Squared => Loss::Squared,
         Loss::Huber(d) => Loss::Huber(d / s),
@@ -729,17 +744,19 @@ fn adjust_graph(
             &mut stages,
         )?
         .report;
-    if estimate_pp || cfg.distortion {
+    if estimate_pp || cfg.distortion || cfg.estimate_aspect_ratio {
         let (f_now, _, k_now) = metric.intrinsics(&cams[..cl], &glob);
+        let a_now = metric.aspect(&glob);
         let free = Metric {
             focal,
             principal_point: (!estimate_pp).then_some(pp0),
             k1: (!cfg.distortion).then_some(k_now),
+            aspect: (!cfg.estimate_aspect_ratio).then_some(a_now),
         };
-        let mut glob2 = free.glob(f_now, pp0, k_now);
+        let mut glob2 = free.glob(f_now, pp0, k_now, a_now);
         let stage = Stage {
             name: "metric-ba-intrinsics",
-            what: "metric bundle adjustment (principal point, distortion)",
+            what: "metric bundle adjustment (principal point, distortion, aspect ratio)",
             rms_scale: s,
         };
         report = stage
@@ -856,6 +873,7 @@ fn to_pixels(
             a.principal_point[1] + s * cn[1],
         ],
         k1,
+        aspect: m.aspect(glob),
         rotations,
         translations,
         points,

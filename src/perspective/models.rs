@@ -16,18 +16,19 @@ pub enum Focal {
     PerFrame,
 }
 
-/// The perspective camera with zero skew and unit aspect ratio, optionally with one radial
-/// distortion coefficient (COLMAP's `SIMPLE_RADIAL`):
+/// The perspective camera with zero skew, optionally with one radial distortion coefficient
+/// (COLMAP's `SIMPLE_RADIAL`) and an aspect ratio `a = f_x / f_y` other than 1 (COLMAP's
+/// `PINHOLE`; non-square pixels):
 ///
 /// ```text
-///   X_c = R X + t,   n = (X_c,1 / X_c,3, X_c,2 / X_c,3),
-///   π(X) = f (1 + k₁ ‖n‖²) n + c,     r = π(X) − w.
+///   X_c = R X + t,   n = (X_c,1 / X_c,3, X_c,2 / X_c,3),   d = 1 + k₁ ‖n‖²,
+///   π(X) = (a f d n₁ + c₁,  f d n₂ + c₂),     r = π(X) − w.
 /// ```
 ///
 /// Camera (stored): `R` row-major (9), `t` (3), and `f` when [`Focal::PerFrame`]; tangent:
 /// the left rotation increment `R ← exp([ω]ₓ) R` (3), `t` (3), `f`. Point: `X ∈ R³`.
 /// Shared parameters, in order: `f` when [`Focal::Shared`], `c` when
-/// `principal_point` is `None`, `k₁` when `k1` is `None`.
+/// `principal_point` is `None`, `k₁` when `k1` is `None`, `a` when `aspect` is `None`.
 ///
 /// The gauge is a similarity (7 degrees of freedom): camera 0's pose is pinned, and on
 /// camera 1 the scaling about camera 0's centre (`δt₁ = t₁ − R₁ R₀ᵀ t₀`).
@@ -38,11 +39,14 @@ pub struct Metric {
     pub principal_point: Option<[f64; 2]>,
     /// Known radial coefficient (0 = none), or `None` to estimate it (shared).
     pub k1: Option<f64>,
+    /// Known aspect ratio `f_x / f_y` (1 = square pixels), or `None` to estimate it (shared).
+    pub aspect: Option<f64>,
 }
 
 impl Metric {
-    /// Index of the shared focal, principal point and `k₁` in the shared parameters.
-    fn layout(&self) -> (Option<usize>, Option<usize>, Option<usize>) {
+    /// Index of the shared focal, principal point, `k₁` and aspect ratio in the shared
+    /// parameters.
+    fn layout(&self) -> (Option<usize>, Option<usize>, Option<usize>, Option<usize>) {
         let mut n = 0;
         let mut take = |on: bool, len: usize| {
             on.then(|| {
@@ -53,13 +57,14 @@ impl Metric {
         let f = take(self.focal == Focal::Shared, 1);
         let c = take(self.principal_point.is_none(), 2);
         let k = take(self.k1.is_none(), 1);
-        (f, c, k)
+        let a = take(self.aspect.is_none(), 1);
+        (f, c, k, a)
     }
 
     /// The shared-parameter vector for the given values (only the free ones are stored).
-    pub fn glob(&self, focal: f64, principal_point: [f64; 2], k1: f64) -> Vec<f64> {
+    pub fn glob(&self, focal: f64, principal_point: [f64; 2], k1: f64, aspect: f64) -> Vec<f64> {
         let mut g = vec![0.0; self.glob_len()];
-        let (gf, gc, gk) = self.layout();
+        let (gf, gc, gk, ga) = self.layout();
         if let Some(i) = gf {
             g[i] = focal;
         }
@@ -70,12 +75,24 @@ impl Metric {
         if let Some(i) = gk {
             g[i] = k1;
         }
+        if let Some(i) = ga {
+            g[i] = aspect;
+        }
         g
     }
 
-    /// `(f, c, k₁)` of camera `cam` given the shared parameters.
+    /// The aspect ratio `f_x / f_y` given the shared parameters.
+    pub fn aspect(&self, glob: &[f64]) -> f64 {
+        match (self.aspect, self.layout().3) {
+            (Some(a), _) => a,
+            (None, Some(i)) => glob[i],
+            (None, None) => 1.0,
+        }
+    }
+
+    /// `(f, c, k₁)` of camera `cam` given the shared parameters (`f` is `f_y`).
     pub fn intrinsics(&self, cam: &[f64], glob: &[f64]) -> (f64, [f64; 2], f64) {
-        let (gf, gc, gk) = self.layout();
+        let (gf, gc, gk, _) = self.layout();
         let f = match self.focal {
             Focal::Fixed(f) => f,
             Focal::Shared => glob[gf.unwrap_or(0)],
@@ -154,8 +171,8 @@ impl BundleModel for Metric {
         2
     }
     fn glob_len(&self) -> usize {
-        let (f, c, k) = self.layout();
-        f.map_or(0, |_| 1) + c.map_or(0, |_| 2) + k.map_or(0, |_| 1)
+        let (f, c, k, a) = self.layout();
+        f.map_or(0, |_| 1) + c.map_or(0, |_| 2) + k.map_or(0, |_| 1) + a.map_or(0, |_| 1)
     }
 
     #[inline]
@@ -173,11 +190,12 @@ impl BundleModel for Metric {
             r[3 * i] * x[0] + r[3 * i + 1] * x[1] + r[3 * i + 2] * x[2] + cam[9 + i]
         });
         let (f, c, k1) = self.intrinsics(cam, glob);
+        let asp = self.aspect(glob);
         let iz = 1.0 / xc[2];
         let (nx, ny) = (xc[0] * iz, xc[1] * iz);
         let r2 = nx * nx + ny * ny;
         let d = 1.0 + k1 * r2;
-        res[0] = f * d * nx + c[0] - w[0];
+        res[0] = asp * f * d * nx + c[0] - w[0];
         res[1] = f * d * ny + c[1] - w[1];
         let Some(Jacobians {
             cam: jc,
@@ -187,14 +205,18 @@ impl BundleModel for Metric {
         else {
             return;
         };
-        // ∂π/∂n (2×2), then ∂n/∂X_c = [1/z 0 −n_x/z; 0 1/z −n_y/z].
+        // ∂π/∂n (2×2; the first row times the aspect ratio), then
+        // ∂n/∂X_c = [1/z 0 −n_x/z; 0 1/z −n_y/z].
         let a11 = f * (d + 2.0 * k1 * nx * nx);
         let a12 = f * 2.0 * k1 * nx * ny;
         let a22 = f * (d + 2.0 * k1 * ny * ny);
+        let (b11, b12) = (asp * a11, asp * a12);
         let a: [[f64; 3]; 2] = [
-            [a11 * iz, a12 * iz, -(a11 * nx + a12 * ny) * iz],
+            [b11 * iz, b12 * iz, -(b11 * nx + b12 * ny) * iz],
             [a12 * iz, a22 * iz, -(a12 * nx + a22 * ny) * iz],
         ];
+        // The x row of every intrinsic derivative carries the aspect ratio.
+        let sx = [asp, 1.0];
         let cl = self.cam_len();
         for row in 0..2 {
             let jr = &mut jc[row * cl..(row + 1) * cl];
@@ -205,7 +227,7 @@ impl BundleModel for Metric {
                 jr[9 + i] = a[row][i];
             }
             if self.focal == Focal::PerFrame {
-                jr[12] = d * if row == 0 { nx } else { ny };
+                jr[12] = sx[row] * d * if row == 0 { nx } else { ny };
             }
             for j in 0..3 {
                 jp[row * 3 + j] = (0..3).map(|i| a[row][i] * r[3 * i + j]).sum();
@@ -214,9 +236,9 @@ impl BundleModel for Metric {
         let gl = self.glob_len();
         if gl > 0 {
             jg.iter_mut().for_each(|v| *v = 0.0);
-            let (gf, gc, gk) = self.layout();
+            let (gf, gc, gk, ga) = self.layout();
             if let Some(i) = gf {
-                jg[i] = d * nx;
+                jg[i] = asp * d * nx;
                 jg[gl + i] = d * ny;
             }
             if let Some(i) = gc {
@@ -224,8 +246,11 @@ impl BundleModel for Metric {
                 jg[gl + i + 1] = 1.0;
             }
             if let Some(i) = gk {
-                jg[i] = f * r2 * nx;
+                jg[i] = asp * f * r2 * nx;
                 jg[gl + i] = f * r2 * ny;
+            }
+            if let Some(i) = ga {
+                jg[i] = f * d * nx;
             }
         }
     }
@@ -473,18 +498,20 @@ mod tests {
         orthonormalize(&mut cam[..9]);
         let pt = [0.3, -0.2, 0.5];
         let w = [0.2, -0.1];
-        for (focal, pp, k1) in [
-            (Focal::Fixed(1.2), Some([0.01, -0.02]), Some(0.0)),
-            (Focal::Shared, None, None),
-            (Focal::PerFrame, Some([0.0, 0.0]), None),
+        for (focal, pp, k1, aspect) in [
+            (Focal::Fixed(1.2), Some([0.01, -0.02]), Some(0.0), Some(1.0)),
+            (Focal::Shared, None, None, None),
+            (Focal::PerFrame, Some([0.0, 0.0]), None, Some(0.9)),
+            (Focal::PerFrame, None, Some(0.1), None),
         ] {
             let m = Metric {
                 focal,
                 principal_point: pp,
                 k1,
+                aspect,
             };
             let cl = m.cam_len();
-            let glob = m.glob(1.1, [0.02, 0.01], -0.05);
+            let glob = m.glob(1.1, [0.02, 0.01], -0.05, 0.8);
             check(&m, &cam[..cl], &pt, &glob, w);
             for loss in [Loss::Huber(0.05), Loss::Cauchy(0.05), Loss::Cauchy(10.0)] {
                 check(&Robust { inner: m, loss }, &cam[..cl], &pt, &glob, w);
@@ -499,6 +526,7 @@ mod tests {
                 focal: Focal::Fixed(1.0),
                 principal_point: Some([0.0, 0.0]),
                 k1: Some(0.0),
+                aspect: Some(1.0),
             },
             loss: Loss::Cauchy(0.1),
         };

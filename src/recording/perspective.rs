@@ -115,9 +115,12 @@ pub(super) fn log_perspective(
             (2.0 * m.principal_point[1] + 1.0) as f32,
         ]);
     let pinhole = |f: usize| {
-        rerun::Pinhole::from_focal_length_and_resolution([m.focal_px[f] as f32; 2], size)
-            .with_principal_point([m.principal_point[0] as f32, m.principal_point[1] as f32])
-            .with_image_plane_distance(0.15f32)
+        rerun::Pinhole::from_focal_length_and_resolution(
+            [(m.aspect * m.focal_px[f]) as f32, m.focal_px[f] as f32],
+            size,
+        )
+        .with_principal_point([m.principal_point[0] as f32, m.principal_point[1] as f32])
+        .with_image_plane_distance(0.15f32)
     };
     // Camera-to-world: translation = centre, rotation = Rᵀ (its columns are the camera's
     // x (right), y (down), z (forward) axes, Rerun's default RDF pinhole frame).

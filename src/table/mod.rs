@@ -908,6 +908,14 @@ impl TrackTable {
         }
     }
 
+    /// Multiplies every observation's x by `k[0]` and y by `k[1]`. `O(observations)`.
+    pub fn scale(&mut self, k: [f64; 2]) {
+        for e in self.rows.iter_mut().flatten() {
+            e.x *= k[0];
+            e.y *= k[1];
+        }
+    }
+
     /// A copy with frames and tracks reordered (`frames[k]` is the old index of new frame k).
     pub fn permuted(&self, frames: &[usize], tracks: &[usize]) -> TrackTable {
         self.select(frames, tracks)
