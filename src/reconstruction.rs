@@ -2737,39 +2737,40 @@ fn restore_image_frame(
     pp_from_image_size: bool,
 ) {
     rec.aspect_ratio = aspect;
-    if aspect != 1.0 {
-        restore_aspect(rec, aspect);
-    }
-    if origin == [0.0, 0.0] {
+    if origin == [0.0, 0.0] && aspect == 1.0 {
         return;
     }
-    let o = Vector2::new(origin[0], origin[1]);
+    // An image position `v` of the fit's frame in the input's: `diag(aspect, 1) v + origin`.
+    let to_input = |v: &mut [f64]| {
+        v[0] = aspect * v[0] + origin[0];
+        v[1] += origin[1];
+    };
     for f in &mut rec.frames {
-        f.translation[0] += origin[0];
-        f.translation[1] += origin[1];
+        to_input(&mut f.translation);
     }
-    for t in rec
-        .model
-        .translations
-        .iter_mut()
-        .chain(rec.outlier_model.translations.iter_mut())
-    {
-        *t += o;
+    for m in [&mut rec.model, &mut rec.outlier_model] {
+        m.aspect *= aspect;
+        m.translations
+            .iter_mut()
+            .for_each(|t| to_input(t.as_mut_slice()));
     }
     for m in [&mut rec.affine_prediction, &mut rec.outlier_prediction] {
         for j in 0..m.ncols() {
-            for r in 0..m.nrows() {
-                m[(r, j)] += origin[r % 2];
+            for r in (0..m.nrows()).step_by(2) {
+                m[(r, j)] = aspect * m[(r, j)] + origin[0];
+                m[(r + 1, j)] += origin[1];
             }
         }
     }
     if let Some(pr) = &mut rec.projective {
-        // The table's coordinates are the input's minus `origin`: a normalization of scale 1.
+        // The table's coordinates are the input's minus `origin`, x then divided by
+        // `aspect`: `P ← [I₂ origin; 0 1] diag(aspect, 1, 1) P`.
         let shift = projective::Normalization {
             centre: origin,
             scale: 1.0,
         };
         for c in &mut pr.model.cameras {
+            c[..4].iter_mut().for_each(|v| *v *= aspect);
             *c = shift.camera_to_pixels(c);
             projective::bundle::normalize(c);
         }
@@ -2780,55 +2781,19 @@ fn restore_image_frame(
         }
     }
     if let Some(pe) = &mut rec.perspective {
-        for d in 0..2 {
-            pe.model.principal_point[d] += origin[d];
-            pe.intrinsics.principal_point[d] += origin[d];
-            pe.intrinsics.k[d][2] += origin[d];
-        }
-        if pp_from_image_size && pe.intrinsics.principal_point_source == "given" {
-            pe.intrinsics.principal_point_source = "image centre";
-        }
-    }
-}
-
-/// Multiplies a reconstruction's image x axis by `aspect` (the first half of
-/// [`restore_image_frame`]).
-fn restore_aspect(rec: &mut Reconstruction, aspect: f64) {
-    for f in &mut rec.frames {
-        f.translation[0] *= aspect;
-    }
-    for m in [&mut rec.model, &mut rec.outlier_model] {
-        m.aspect *= aspect;
-        m.translations.iter_mut().for_each(|t| t[0] *= aspect);
-    }
-    for m in [&mut rec.affine_prediction, &mut rec.outlier_prediction] {
-        for j in 0..m.ncols() {
-            for r in (0..m.nrows()).step_by(2) {
-                m[(r, j)] *= aspect;
-            }
-        }
-    }
-    if let Some(pr) = &mut rec.projective {
-        for c in &mut pr.model.cameras {
-            c[..4].iter_mut().for_each(|v| *v *= aspect);
-            projective::bundle::normalize(c);
-        }
-        if pr.cameras.len() == pr.model.cameras.len() {
-            for (f, cam) in pr.cameras.iter_mut().enumerate() {
-                cam.p = pr.model.camera_matrix(f);
-            }
-        }
-    }
-    if let Some(pe) = &mut rec.perspective {
         pe.model.aspect *= aspect;
-        pe.model.principal_point[0] *= aspect;
+        to_input(&mut pe.model.principal_point);
         let k = &mut pe.intrinsics;
-        k.aspect_ratio *= aspect;
-        k.principal_point[0] *= aspect;
+        to_input(&mut k.principal_point);
         k.k[0][0] *= aspect;
-        k.k[0][2] *= aspect;
-        if k.aspect_ratio_source == "square pixels" {
+        k.k[0][2] = k.principal_point[0];
+        k.k[1][2] = k.principal_point[1];
+        k.aspect_ratio *= aspect;
+        if aspect != 1.0 && k.aspect_ratio_source == "square pixels" {
             k.aspect_ratio_source = "given";
+        }
+        if pp_from_image_size && k.principal_point_source == "given" {
+            k.principal_point_source = "image centre";
         }
     }
 }
