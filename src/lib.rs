@@ -37,6 +37,7 @@ pub mod objects;
 pub mod observer;
 pub mod output;
 pub mod perspective;
+pub mod pixel_aspect;
 pub mod projective;
 pub mod reconstruction;
 pub mod reconstruction_file;

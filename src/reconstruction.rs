@@ -86,13 +86,19 @@ pub struct Config {
     pub rank2_warning_ratio: f64,
     /// Known aspect ratio of the pixels, `f_x / f_y` (the width of a pixel's image of a
     /// unit square over its height; 1 = square pixels). Video digitised from a 4:3 picture
-    /// at 512×480 has 0.8, NTSC DV (720×480) 0.9 (10:11 sample aspect ratio). The
+    /// at 512×480 has 0.8, NTSC DV (720×480) 1.1 (10:11 sample aspect ratio). The
     /// pipeline divides the image's x coordinates by it (about the observations'
     /// centroid) so that every camera model works in square pixels, and multiplies the
     /// results back: [`Reconstruction::aspect_ratio`]. Residuals and RMS values are then
     /// in square pixels the size of the pixel height. Default `None` (1).
     #[serde(default)]
     pub aspect_ratio: Option<f64>,
+    /// Where [`Config::aspect_ratio`] came from, in words, for the reports
+    /// ([`Reconstruction::aspect_ratio_source`]): `None` means given by the user.
+    /// [`crate::pixel_aspect`] fills it when the ratio is read from the input files or
+    /// assumed from the frame size. Default `None`.
+    #[serde(default)]
+    pub aspect_ratio_source: Option<String>,
 }
 
 impl Default for Config {
@@ -124,6 +130,7 @@ impl Default for Config {
             rank3_warning_ratio: 0.1,
             rank2_warning_ratio: 0.05,
             aspect_ratio: None,
+            aspect_ratio_source: None,
         }
     }
 }
@@ -504,8 +511,9 @@ pub struct PerspectiveIntrinsics {
     pub k1: f64,
     /// Aspect ratio `f_x / f_y` (1: square pixels); `K₀₀ = aspect_ratio · focal_px`.
     pub aspect_ratio: f64,
-    /// `"square pixels"`, `"given"` ([`Config::aspect_ratio`]) or `"estimated"`.
-    pub aspect_ratio_source: &'static str,
+    /// `"square pixels"`, `"estimated"`, or [`Reconstruction::aspect_ratio_source`] when
+    /// the ratio was given, read or assumed ([`Config::aspect_ratio`]).
+    pub aspect_ratio_source: String,
     pub image_size: Option<[u32; 2]>,
 }
 
@@ -641,8 +649,9 @@ impl PerspectiveResult {
             aspect_ratio_source: if cfg.estimate_aspect_ratio {
                 "estimated"
             } else {
-                "square pixels"
-            },
+                SQUARE_PIXELS
+            }
+            .to_string(),
             image_size: cfg.intrinsics.image_size,
         };
         Self {
@@ -1028,6 +1037,9 @@ pub struct Reconstruction {
     /// translation[0]`, `y = scale · rotation[1] · xyz + translation[1]`; the perspective
     /// intrinsics carry it too. Residuals are in square pixels of the pixel height.
     pub aspect_ratio: f64,
+    /// Where the aspect ratio came from: `"square pixels"` (nothing known), `"given"`, or
+    /// what [`crate::pixel_aspect`] read or assumed ([`Config::aspect_ratio_source`]).
+    pub aspect_ratio_source: String,
     /// The metric model (kept frames × kept tracks), for library users.
     #[serde(skip)]
     pub model: MetricModel,
@@ -1159,7 +1171,7 @@ impl Reconstruction {
         // Long or sparse tables take the sparse pipeline.
         if let Some(reason) = sparse_reason(&kept_table, config)? {
             let mut rec = sparse_reconstruction(table, kept, config, timer, reason, warnings)?;
-            restore_image_frame(&mut rec, origin, aspect, pp_from_image_size);
+            restore_image_frame(&mut rec, origin, aspect, config, pp_from_image_size);
             return Ok(rec);
         }
         // 2. Robust pass (affine): outlier tracks, gross entries, other rigid objects.
@@ -1208,7 +1220,7 @@ impl Reconstruction {
         let mut rec = assemble(
             table, kept, selection, fitted, outliers, choice, timer, warnings,
         );
-        restore_image_frame(&mut rec, origin, aspect, pp_from_image_size);
+        restore_image_frame(&mut rec, origin, aspect, config, pp_from_image_size);
         Ok(rec)
     }
 
@@ -1835,6 +1847,7 @@ fn assemble(
         timings: timer.timings,
         mesh: None,
         aspect_ratio: 1.0,
+        aspect_ratio_source: SQUARE_PIXELS.to_string(),
         sparse: None,
         model,
         affine_structure: affine.s_hat,
@@ -2724,6 +2737,9 @@ fn centred_config(config: &Config, origin: [f64; 2], aspect: f64) -> (Option<Con
     (Some(c), from_size)
 }
 
+/// [`Reconstruction::aspect_ratio_source`] when nothing is known about the pixels.
+pub const SQUARE_PIXELS: &str = "square pixels";
+
 /// Moves a reconstruction computed on a table translated by `−origin`, its x axis then
 /// divided by `aspect`, back to the input's image coordinates (`x ← aspect·x + origin`):
 /// the cameras' translations and x rows, the affine predictions, the projective cameras
@@ -2734,9 +2750,16 @@ fn restore_image_frame(
     rec: &mut Reconstruction,
     origin: [f64; 2],
     aspect: f64,
+    config: &Config,
     pp_from_image_size: bool,
 ) {
     rec.aspect_ratio = aspect;
+    let source = match (&config.aspect_ratio_source, config.aspect_ratio) {
+        (_, None) => SQUARE_PIXELS.to_string(),
+        (Some(s), Some(_)) => s.clone(),
+        (None, Some(_)) => "given".to_string(),
+    };
+    rec.aspect_ratio_source = source.clone();
     if origin == [0.0, 0.0] && aspect == 1.0 {
         return;
     }
@@ -2789,8 +2812,8 @@ fn restore_image_frame(
         k.k[0][2] = k.principal_point[0];
         k.k[1][2] = k.principal_point[1];
         k.aspect_ratio *= aspect;
-        if aspect != 1.0 && k.aspect_ratio_source == "square pixels" {
-            k.aspect_ratio_source = "given";
+        if aspect != 1.0 && k.aspect_ratio_source == SQUARE_PIXELS {
+            k.aspect_ratio_source = source;
         }
         if pp_from_image_size && k.principal_point_source == "given" {
             k.principal_point_source = "image centre";
@@ -3058,6 +3081,7 @@ fn sparse_reconstruction(
         timings: timer.timings,
         mesh: None,
         aspect_ratio: 1.0,
+        aspect_ratio_source: SQUARE_PIXELS.to_string(),
         sparse: Some(crate::sparse::SparseReport {
             reason,
             observations: prob.graph.n_obs(),

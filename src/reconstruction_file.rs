@@ -222,6 +222,10 @@ pub struct ReconstructionFile {
     /// Aspect ratio of the pixels, `f_x / f_y` (1 in files written before it existed).
     #[serde(default = "one")]
     pub aspect_ratio: f64,
+    /// Where the aspect ratio came from (`"square pixels"` in files written before it
+    /// existed).
+    #[serde(default = "square_pixels")]
+    pub aspect_ratio_source: String,
 }
 
 fn one() -> f64 {
@@ -470,7 +474,8 @@ pub struct IntrinsicsRecord {
     /// `f_x / f_y` (1 in files written before it existed).
     #[serde(default = "one")]
     pub aspect_ratio: f64,
-    /// `"square pixels"`, `"given"` or `"estimated"`.
+    /// `"square pixels"`, `"given"`, `"estimated"`, or where the ratio was read or assumed
+    /// from.
     #[serde(default = "square_pixels")]
     pub aspect_ratio_source: String,
     pub image_size: Option<[u32; 2]>,

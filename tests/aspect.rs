@@ -151,3 +151,138 @@ fn the_perspective_camera_takes_a_known_aspect_ratio_or_estimates_it() {
         }
     }
 }
+
+mod common;
+
+/// CRC-32 of PNG chunks (ISO 3309, polynomial 0xEDB88320), for writing a `pHYs` chunk.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = 0xffff_ffffu32;
+    for &b in bytes {
+        c ^= b as u32;
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                0xedb8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// A small gray PNG at `path` whose `pHYs` chunk states `ppu` pixels per metre along x and y.
+fn png_with_phys(path: &std::path::Path, ppu: [u32; 2]) {
+    let mut png = Vec::new();
+    image::GrayImage::from_fn(32, 24, |x, y| image::Luma([((x * 7 + y * 13) % 255) as u8]))
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    let mut chunk = b"pHYs".to_vec();
+    chunk.extend(ppu[0].to_be_bytes());
+    chunk.extend(ppu[1].to_be_bytes());
+    chunk.push(1);
+    let mut bytes = png[..33].to_vec(); // signature (8) + IHDR (25)
+    bytes.extend(9u32.to_be_bytes());
+    bytes.extend(&chunk);
+    bytes.extend(crc32(&chunk).to_be_bytes());
+    bytes.extend(&png[33..]);
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// Where the CLI takes the aspect ratio from when `--aspect-ratio` is not given: the frames'
+/// PNG `pHYs` chunk (`reconstruct --images`), the frame size of digitised analogue video
+/// (`--image-size 512,480`), else square pixels; `--aspect-ratio` overrides both. A scene
+/// squeezed by 0.8 is fitted exactly only under the right ratio.
+#[test]
+fn cli_takes_the_aspect_ratio_from_the_frames() {
+    let d = common::tmp_dir("aspect", "cli");
+    common::run_ok(common::bin().arg("synth").arg("--out").arg(&d).args([
+        "--frames",
+        "12",
+        "--points",
+        "60",
+        "--noise",
+        "0",
+        "--camera",
+        "scaled-orthographic",
+        // A turntable (one rotation axis) cannot tell the squeeze from the scene's shape.
+        "--motion",
+        "handheld-arc",
+    ]));
+    // The x coordinates squeezed by 0.8 (a 4:3 picture digitised at 512×480).
+    let text = std::fs::read_to_string(d.join("tracks.csv")).unwrap();
+    let mut squeezed = String::new();
+    for (k, line) in text.lines().enumerate() {
+        if k == 0 || line.starts_with('#') {
+            squeezed += line;
+        } else {
+            let v: Vec<&str> = line.split(',').collect();
+            let x: f64 = v[2].parse().unwrap();
+            squeezed += &format!("{},{},{},{}", v[0], v[1], ASPECT * x, v[3]);
+        }
+        squeezed.push('\n');
+    }
+    let tracks = d.join("squeezed.csv");
+    std::fs::write(&tracks, squeezed).unwrap();
+    let frames = d.join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    for k in 0..12 {
+        png_with_phys(&frames.join(format!("{k:03}.png")), [4000, 5000]);
+    }
+    let fit = |name: &str, extra: &[&str]| -> serde_json::Value {
+        let out = d.join(name);
+        common::run_ok(
+            common::bin()
+                .arg("reconstruct")
+                .arg(&tracks)
+                .arg("--out")
+                .arg(&out)
+                .args(["--camera", "scaled-orthographic", "--no-robust"])
+                .args(extra),
+        );
+        serde_json::from_str(&std::fs::read_to_string(out.join("reconstruction.json")).unwrap())
+            .unwrap()
+    };
+    let images = frames.to_str().unwrap();
+    for (name, extra, ratio, source, exact) in [
+        (
+            "phys",
+            vec!["--images", images, "--no-mesh"],
+            0.8,
+            "pHYs chunk: 4000×5000 pixels per metre",
+            true,
+        ),
+        (
+            "size",
+            vec!["--image-size", "512,480"],
+            0.8,
+            "512×480 frame size",
+            true,
+        ),
+        (
+            "given",
+            vec!["--image-size", "512,480", "--aspect-ratio", "1"],
+            1.0,
+            "given",
+            false,
+        ),
+        (
+            "square",
+            vec!["--image-size", "640,480"],
+            1.0,
+            "square pixels",
+            false,
+        ),
+    ] {
+        let json = fit(name, &extra);
+        let got = json["aspect_ratio"].as_f64().unwrap();
+        assert!((got - ratio).abs() < 1e-12, "{name}: aspect ratio {got}");
+        let src = json["aspect_ratio_source"].as_str().unwrap();
+        assert!(src.contains(source), "{name}: source {src:?}");
+        let rms = json["rms_px"].as_f64().unwrap();
+        if exact {
+            assert!(rms < 1e-6, "{name}: RMS {rms} px under the right ratio");
+        } else {
+            assert!(rms > 1e-3, "{name}: RMS {rms} px under square pixels");
+        }
+    }
+}

@@ -88,7 +88,10 @@ pub struct ReconstructOpts {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Aspect ratio of the pixels, fx/fy (1 = square; 0.8 for a 4:3 picture digitised at
-    /// 512×480, 0.9 for NTSC DV at 720×480): every camera model then works in square pixels.
+    /// 512×480, 1.1 for NTSC DV at 720×480): every camera model then works in square pixels.
+    /// Default: what the frames' files state (PNG pHYs, JPEG JFIF, the video's sample
+    /// aspect ratio), else what the frame size implies for digitised analogue video
+    /// (512×480, 720×480, 720×576 …; docs/math.md §9), else 1.
     #[arg(long, value_name = "R")]
     pub aspect_ratio: Option<f64>,
     /// Perspective camera: the known focal length, pixels (default: self-calibrated).
@@ -137,8 +140,16 @@ pub struct ReconstructOpts {
 
 impl ReconstructOpts {
     /// The library configuration; `image_size` is what the tracker saw (`run`), used
-    /// unless `--image-size` is given.
-    pub fn config(&self, camera: CameraArg, image_size: Option<[u32; 2]>) -> Config {
+    /// unless `--image-size` is given; `stated` is the pixels' aspect ratio the frames'
+    /// files state ([`rank3::tracking::FrameSource::pixel_aspect`]). Without
+    /// `--aspect-ratio`, the ratio is the stated one, else the one the frame size implies
+    /// ([`rank3::pixel_aspect::from_frame_size`]), else 1.
+    pub fn config(
+        &self,
+        camera: CameraArg,
+        image_size: Option<[u32; 2]>,
+        stated: Option<rank3::pixel_aspect::PixelAspect>,
+    ) -> Config {
         let a = self;
         let mut config = Config {
             camera: camera.into(),
@@ -163,6 +174,19 @@ impl ReconstructOpts {
         }
         config.metric.force_sdp = a.force_sdp;
         config.aspect_ratio = a.aspect_ratio;
+        if a.aspect_ratio.is_none() {
+            let size = a.image_size.or(image_size);
+            if let Some(pa) = stated
+                .or_else(|| size.and_then(|[w, h]| rank3::pixel_aspect::from_frame_size(w, h)))
+            {
+                info!(
+                    "pixel aspect ratio fx/fy = {}: {} (--aspect-ratio 1 for square pixels)",
+                    pa.ratio, pa.source
+                );
+                config.aspect_ratio = Some(pa.ratio);
+                config.aspect_ratio_source = Some(pa.source);
+            }
+        }
         if a.no_refine {
             config.refine = None;
         }
@@ -294,7 +318,11 @@ pub fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         t.n_observed(),
         100.0 * t.fill()
     );
-    let config = a.opts.config(a.camera, None);
+    let stated = match &a.images {
+        Some(images) => rank3::tracking::FrameSource::open(images)?.pixel_aspect(),
+        None => None,
+    };
+    let config = a.opts.config(a.camera, None, stated);
     a.opts.print_settings(a.camera, &config);
     if let Some(objects) = a.opts.objects {
         return reconstruct_objects(

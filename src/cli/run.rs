@@ -96,7 +96,7 @@ pub fn run(a: &RunArgs) -> Result<(), rank3::Error> {
         );
         table = table.select(&frames, &full);
     }
-    let config = a.recon.config(a.camera, tracked_size);
+    let config = a.recon.config(a.camera, tracked_size, tracked.pixel_aspect);
     a.recon.print_settings(a.camera, &config);
     if let Some(objects) = a.recon.objects {
         #[cfg(feature = "rerun")]

@@ -97,6 +97,8 @@ pub struct Tracked {
     pub table: rank3::TrackTable,
     /// Width and height of the frames, pixels.
     pub image_size: Option<[u32; 2]>,
+    /// The pixels' aspect ratio the input's files state, if any.
+    pub pixel_aspect: Option<rank3::pixel_aspect::PixelAspect>,
     /// Per-frame counts (recorded with `--rrd`).
     #[cfg_attr(not(feature = "rerun"), allow(dead_code))]
     pub stats: Vec<rank3::tracking::FrameStats>,
@@ -117,6 +119,7 @@ pub fn track_input(
         .map(rank3::tracking::read_init_points)
         .transpose()?;
     let mut src = rank3::tracking::FrameSource::open(input)?;
+    let pixel_aspect = src.pixel_aspect();
     let bar = verbosity::progress(
         src.len_hint().map(|n| n as u64),
         "tracking {bar:30} {pos}/{len} frames ({per_sec}, eta {eta}) {msg}",
@@ -169,6 +172,7 @@ pub fn track_input(
         table,
         stats,
         image_size,
+        pixel_aspect,
     })
 }
 

@@ -290,6 +290,21 @@ impl FrameSource {
         }
     }
 
+    /// The pixels' aspect ratio `f_x / f_y` when the input states one: the first image's
+    /// PNG `pHYs` chunk or JPEG JFIF densities, the video's sample aspect ratio
+    /// ([`crate::pixel_aspect`]); `None` when it states none or square pixels.
+    pub fn pixel_aspect(&self) -> Option<crate::pixel_aspect::PixelAspect> {
+        match self {
+            FrameSource::Images { files, .. } => {
+                let first = files.first()?;
+                let mut a = crate::pixel_aspect::from_image_file(first)?;
+                a.source = format!("{} ({})", a.source, first.display());
+                Some(a)
+            }
+            FrameSource::Video(v) => v.pixel_aspect.clone(),
+        }
+    }
+
     /// The input path.
     pub fn path(&self) -> &Path {
         match self {
@@ -326,6 +341,7 @@ pub struct VideoReader {
     width: usize,
     height: usize,
     frames_hint: Option<usize>,
+    pixel_aspect: Option<crate::pixel_aspect::PixelAspect>,
     child: Child,
     stdout: ChildStdout,
     index: usize,
@@ -362,7 +378,7 @@ impl VideoReader {
                 "-select_streams",
                 "v:0",
                 "-show_entries",
-                "stream=width,height,nb_frames",
+                "stream=width,height,nb_frames,sample_aspect_ratio",
                 "-of",
                 "default=noprint_wrappers=1",
             ])
@@ -419,6 +435,10 @@ impl VideoReader {
             width,
             height,
             frames_hint: field("nb_frames"),
+            pixel_aspect: text
+                .lines()
+                .find_map(|l| l.strip_prefix("sample_aspect_ratio="))
+                .and_then(crate::pixel_aspect::from_sample_aspect_ratio),
             child,
             stdout,
             index: 0,
