@@ -154,22 +154,6 @@ fn the_perspective_camera_takes_a_known_aspect_ratio_or_estimates_it() {
 
 mod common;
 
-/// CRC-32 of PNG chunks (ISO 3309, polynomial 0xEDB88320), for writing a `pHYs` chunk.
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut c = 0xffff_ffffu32;
-    for &b in bytes {
-        c ^= b as u32;
-        for _ in 0..8 {
-            c = if c & 1 != 0 {
-                0xedb8_8320 ^ (c >> 1)
-            } else {
-                c >> 1
-            };
-        }
-    }
-    !c
-}
-
 /// A small gray PNG at `path` whose `pHYs` chunk states `ppu` pixels per metre along x and y.
 fn png_with_phys(path: &std::path::Path, ppu: [u32; 2]) {
     let mut png = Vec::new();
@@ -183,7 +167,7 @@ fn png_with_phys(path: &std::path::Path, ppu: [u32; 2]) {
     let mut bytes = png[..33].to_vec(); // signature (8) + IHDR (25)
     bytes.extend(9u32.to_be_bytes());
     bytes.extend(&chunk);
-    bytes.extend(crc32(&chunk).to_be_bytes());
+    bytes.extend(common::crc32(&chunk).to_be_bytes());
     bytes.extend(&png[33..]);
     std::fs::write(path, bytes).unwrap();
 }

@@ -901,20 +901,6 @@ fn oversized_inputs_are_refused_or_degrade_gracefully() {
     );
 
     // A PNG whose header declares 20 000 × 20 000 pixels (and holds almost no data).
-    fn crc32(bytes: &[u8]) -> u32 {
-        let mut c = 0xFFFF_FFFFu32;
-        for &b in bytes {
-            c ^= b as u32;
-            for _ in 0..8 {
-                c = if c & 1 != 0 {
-                    0xEDB8_8320 ^ (c >> 1)
-                } else {
-                    c >> 1
-                };
-            }
-        }
-        !c
-    }
     let mut ihdr = b"IHDR".to_vec();
     ihdr.extend_from_slice(&20_000u32.to_be_bytes());
     ihdr.extend_from_slice(&20_000u32.to_be_bytes());
@@ -922,7 +908,7 @@ fn oversized_inputs_are_refused_or_degrade_gracefully() {
     let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
     png.extend_from_slice(&13u32.to_be_bytes());
     png.extend_from_slice(&ihdr);
-    png.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+    png.extend_from_slice(&common::crc32(&ihdr).to_be_bytes());
     // A start of image data (the decoder reads the header up to it) and the end marker.
     for (kind, data) in [
         (&b"IDAT"[..], &[0x78u8, 0x9c, 0x03, 0x00][..]),
@@ -932,7 +918,7 @@ fn oversized_inputs_are_refused_or_degrade_gracefully() {
         chunk.extend_from_slice(data);
         png.extend_from_slice(&(data.len() as u32).to_be_bytes());
         png.extend_from_slice(&chunk);
-        png.extend_from_slice(&crc32(&chunk).to_be_bytes());
+        png.extend_from_slice(&common::crc32(&chunk).to_be_bytes());
     }
     let frames = d.join("frames");
     std::fs::create_dir_all(&frames).unwrap();
