@@ -196,18 +196,9 @@ pub fn colmap_model(
                 cy,
             }
         } else if m.k1 != 0.0 {
-            ColmapCameraModel::SimpleRadial {
-                f,
-                cx: m.principal_point[0] + OFF,
-                cy: m.principal_point[1] + OFF,
-                k: m.k1,
-            }
+            ColmapCameraModel::SimpleRadial { f, cx, cy, k: m.k1 }
         } else {
-            ColmapCameraModel::SimplePinhole {
-                f,
-                cx: m.principal_point[0] + OFF,
-                cy: m.principal_point[1] + OFF,
-            }
+            ColmapCameraModel::SimplePinhole { f, cx, cy }
         },
         width: w,
         height: h,

@@ -66,6 +66,13 @@ pub fn from_frame_size(width: u32, height: u32) -> Option<PixelAspect> {
     })
 }
 
+/// Rules 2 and 3 of the module documentation for a sequence of frames: what their files
+/// state (`stated`, e.g. [`crate::tracking::FrameSource::pixel_aspect`]), else what their
+/// `size` (width, height) implies, else `None` (square pixels).
+pub fn of_frames(stated: Option<PixelAspect>, size: Option<[u32; 2]>) -> Option<PixelAspect> {
+    stated.or_else(|| size.and_then(|[w, h]| from_frame_size(w, h)))
+}
+
 /// `f_x / f_y` from a positive pair `x : y` of densities (or `den : num` of a SAR); `None`
 /// when either is zero or the ratio is 1 (square pixels need no report) or implausible
 /// (outside 1/4 … 4).

@@ -1171,7 +1171,7 @@ impl Reconstruction {
         // Long or sparse tables take the sparse pipeline.
         if let Some(reason) = sparse_reason(&kept_table, config)? {
             let mut rec = sparse_reconstruction(table, kept, config, timer, reason, warnings)?;
-            restore_image_frame(&mut rec, origin, aspect, config, pp_from_image_size);
+            restore_image_frame(&mut rec, origin, config, pp_from_image_size);
             return Ok(rec);
         }
         // 2. Robust pass (affine): outlier tracks, gross entries, other rigid objects.
@@ -1220,7 +1220,7 @@ impl Reconstruction {
         let mut rec = assemble(
             table, kept, selection, fitted, outliers, choice, timer, warnings,
         );
-        restore_image_frame(&mut rec, origin, aspect, config, pp_from_image_size);
+        restore_image_frame(&mut rec, origin, config, pp_from_image_size);
         Ok(rec)
     }
 
@@ -2741,7 +2741,8 @@ fn centred_config(config: &Config, origin: [f64; 2], aspect: f64) -> (Option<Con
 pub const SQUARE_PIXELS: &str = "square pixels";
 
 /// Moves a reconstruction computed on a table translated by `−origin`, its x axis then
-/// divided by `aspect`, back to the input's image coordinates (`x ← aspect·x + origin`):
+/// divided by `aspect` ([`Config::aspect_ratio`] of `config`, 1 when `None`), back to the
+/// input's image coordinates (`x ← aspect·x + origin`):
 /// the cameras' translations and x rows, the affine predictions, the projective cameras
 /// (`P ← [diag(aspect, 1) origin; 0 1] P`, renormalised to unit Frobenius norm) and the
 /// perspective intrinsics. Rotations, scales, points and residuals do not depend on the
@@ -2749,10 +2750,10 @@ pub const SQUARE_PIXELS: &str = "square pixels";
 fn restore_image_frame(
     rec: &mut Reconstruction,
     origin: [f64; 2],
-    aspect: f64,
     config: &Config,
     pp_from_image_size: bool,
 ) {
+    let aspect = config.aspect_ratio.unwrap_or(1.0);
     rec.aspect_ratio = aspect;
     let source = match (&config.aspect_ratio_source, config.aspect_ratio) {
         (_, None) => SQUARE_PIXELS.to_string(),

@@ -174,18 +174,15 @@ impl ReconstructOpts {
         }
         config.metric.force_sdp = a.force_sdp;
         config.aspect_ratio = a.aspect_ratio;
-        if a.aspect_ratio.is_none() {
-            let size = a.image_size.or(image_size);
-            if let Some(pa) = stated
-                .or_else(|| size.and_then(|[w, h]| rank3::pixel_aspect::from_frame_size(w, h)))
-            {
-                info!(
-                    "pixel aspect ratio fx/fy = {}: {} (--aspect-ratio 1 for square pixels)",
-                    pa.ratio, pa.source
-                );
-                config.aspect_ratio = Some(pa.ratio);
-                config.aspect_ratio_source = Some(pa.source);
-            }
+        if a.aspect_ratio.is_none()
+            && let Some(pa) = rank3::pixel_aspect::of_frames(stated, a.image_size.or(image_size))
+        {
+            info!(
+                "pixel aspect ratio fx/fy = {}: {} (--aspect-ratio 1 for square pixels)",
+                pa.ratio, pa.source
+            );
+            config.aspect_ratio = Some(pa.ratio);
+            config.aspect_ratio_source = Some(pa.source);
         }
         if a.no_refine {
             config.refine = None;
@@ -319,7 +316,7 @@ pub fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         100.0 * t.fill()
     );
     let stated = match &a.images {
-        Some(images) => rank3::tracking::FrameSource::open(images)?.pixel_aspect(),
+        Some(images) => rank3::tracking::FrameSource::pixel_aspect_of(images)?,
         None => None,
     };
     let config = a.opts.config(a.camera, None, stated);

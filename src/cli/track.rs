@@ -299,11 +299,7 @@ pub fn track(a: &TrackArgs) -> Result<(), rank3::Error> {
         100.0 * table.fill()
     );
     // The table does not carry the frames' pixel shape: say what `reconstruct` needs.
-    if let Some(pa) = tracked.pixel_aspect.or_else(|| {
-        tracked
-            .image_size
-            .and_then(|[w, h]| rank3::pixel_aspect::from_frame_size(w, h))
-    }) {
+    if let Some(pa) = rank3::pixel_aspect::of_frames(tracked.pixel_aspect, tracked.image_size) {
         info!(
             "pixel aspect ratio fx/fy = {}: {}; reconstruct these tracks with --aspect-ratio {} \
              (or --images {})",

@@ -305,6 +305,17 @@ impl FrameSource {
         }
     }
 
+    /// [`FrameSource::pixel_aspect`] of the folder or video at `path`, without decoding a
+    /// frame or starting `ffmpeg` (a folder's first image header; `ffprobe` for a video).
+    pub fn pixel_aspect_of(path: &Path) -> Result<Option<crate::pixel_aspect::PixelAspect>> {
+        let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+        if meta.is_dir() {
+            Ok(FrameSource::images(path)?.pixel_aspect())
+        } else {
+            Ok(probe(path)?.pixel_aspect)
+        }
+    }
+
     /// The input path.
     pub fn path(&self) -> &Path {
         match self {
@@ -363,6 +374,68 @@ fn not_installed(path: &Path, program: &str, e: &std::io::Error) -> Error {
     }
 }
 
+/// What `ffprobe` says of a video's first stream.
+struct Probe {
+    width: usize,
+    height: usize,
+    frames_hint: Option<usize>,
+    pixel_aspect: Option<crate::pixel_aspect::PixelAspect>,
+}
+
+/// Runs `ffprobe` on `path` (no decoding): the frame size (checked against the memory
+/// budget and for zero), the frame count when known, the sample aspect ratio.
+fn probe(path: &Path) -> Result<Probe> {
+    let probe = Command::new("ffprobe")
+        .args([
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "stream=width,height,nb_frames,sample_aspect_ratio",
+            "-of",
+            "default=noprint_wrappers=1",
+        ])
+        .arg(path)
+        .output()
+        .map_err(|e| not_installed(path, "ffprobe", &e))?;
+    let text = String::from_utf8_lossy(&probe.stdout);
+    let field = |name: &str| {
+        text.lines()
+            .filter_map(|l| l.strip_prefix(name)?.strip_prefix('='))
+            .find_map(|v| v.trim().parse::<usize>().ok())
+    };
+    let (Some(width), Some(height)) = (field("width"), field("height")) else {
+        let err = String::from_utf8_lossy(&probe.stderr);
+        return Err(Error::Video {
+            path: path.to_path_buf(),
+            message: format!(
+                "FFmpeg cannot read a video stream from this file{}",
+                match err.trim() {
+                    "" => String::new(),
+                    m => format!(": {m}"),
+                }
+            ),
+        });
+    };
+    crate::budget::check_frame(path, width as u64, height as u64)?;
+    if width == 0 || height == 0 {
+        return Err(Error::Video {
+            path: path.to_path_buf(),
+            message: format!("video reports an empty frame size {width}×{height}"),
+        });
+    }
+    Ok(Probe {
+        width,
+        height,
+        frames_hint: field("nb_frames"),
+        pixel_aspect: text
+            .lines()
+            .find_map(|l| l.strip_prefix("sample_aspect_ratio="))
+            .and_then(crate::pixel_aspect::from_sample_aspect_ratio),
+    })
+}
+
 impl VideoReader {
     /// Probes the video's size with `ffprobe` and starts `ffmpeg`.
     pub fn open(path: &Path) -> Result<VideoReader> {
@@ -371,46 +444,12 @@ impl VideoReader {
 
     /// [`VideoReader::open`], streaming 8-bit RGB (`rgb24`) when `color`.
     pub fn open_as(path: &Path, color: bool) -> Result<VideoReader> {
-        let probe = Command::new("ffprobe")
-            .args([
-                "-v",
-                "error",
-                "-select_streams",
-                "v:0",
-                "-show_entries",
-                "stream=width,height,nb_frames,sample_aspect_ratio",
-                "-of",
-                "default=noprint_wrappers=1",
-            ])
-            .arg(path)
-            .output()
-            .map_err(|e| not_installed(path, "ffprobe", &e))?;
-        let text = String::from_utf8_lossy(&probe.stdout);
-        let field = |name: &str| {
-            text.lines()
-                .filter_map(|l| l.strip_prefix(name)?.strip_prefix('='))
-                .find_map(|v| v.trim().parse::<usize>().ok())
-        };
-        let (Some(width), Some(height)) = (field("width"), field("height")) else {
-            let err = String::from_utf8_lossy(&probe.stderr);
-            return Err(Error::Video {
-                path: path.to_path_buf(),
-                message: format!(
-                    "FFmpeg cannot read a video stream from this file{}",
-                    match err.trim() {
-                        "" => String::new(),
-                        m => format!(": {m}"),
-                    }
-                ),
-            });
-        };
-        crate::budget::check_frame(path, width as u64, height as u64)?;
-        if width == 0 || height == 0 {
-            return Err(Error::Video {
-                path: path.to_path_buf(),
-                message: format!("video reports an empty frame size {width}×{height}"),
-            });
-        }
+        let Probe {
+            width,
+            height,
+            frames_hint,
+            pixel_aspect,
+        } = probe(path)?;
         let mut child = Command::new("ffmpeg")
             .args(["-v", "error", "-nostdin", "-i"])
             .arg(path)
@@ -434,11 +473,8 @@ impl VideoReader {
             path: path.to_path_buf(),
             width,
             height,
-            frames_hint: field("nb_frames"),
-            pixel_aspect: text
-                .lines()
-                .find_map(|l| l.strip_prefix("sample_aspect_ratio="))
-                .and_then(crate::pixel_aspect::from_sample_aspect_ratio),
+            frames_hint,
+            pixel_aspect,
             child,
             stdout,
             index: 0,
