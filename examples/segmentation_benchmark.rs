@@ -50,6 +50,7 @@ fn run(h: &Hopkins, objects: Objects, seed: u64) -> (rank3::segment::Segmentatio
         neighbours: env_or("NEIGHBOURS", SegmentConfig::default().neighbours),
         grow_steps: env_or("GROW", SegmentConfig::default().grow_steps),
         smoothness: env_or("SMOOTH", SegmentConfig::default().smoothness),
+        spectral: env_or("SPECTRAL", 1u8) == 1,
         ..Default::default()
     };
     let t = Instant::now();

@@ -55,8 +55,15 @@
 //!    lowers `E` (two pieces of one body, e.g. found on different frames); re-pool `σ`
 //!    over the grouped tracks; back to 2 until `E` stops decreasing or `rounds` is reached.
 //!    At fixed σ every step lowers `E` (the PEARL argument).
-//! 4. With [`Objects::Count`] the automatic solution comes first; it is then brought to
-//!    the count by the cheapest merges (or by additions) and refined with the count fixed.
+//! 4. **The partition at the count** (the given one, or the one found): spectral
+//!    clustering of the tracks' preferences over the pool (`spectral`), each group's
+//!    subspace refitted, then refined locally (reassign to the nearest subspace, refit:
+//!    k-subspaces) while `E` falls. Spectral clustering separates partly dependent motions
+//!    that the energy's own minimum merges (measured in `spectral` and docs/math.md §11);
+//!    the energy keeps choosing the count and the outliers. With
+//!    [`SegmentConfig::spectral`] off (or when no spectral partition of the count has every
+//!    group), a given count is reached from the automatic solution by the cheapest merges
+//!    (or additions) and refined with the count fixed.
 //! 5. The final groups' subspaces are refitted to their tracks for the report (the labels
 //!    stay).
 //!
@@ -71,7 +78,8 @@
 //! (a centroid pre-selection, then trajectory distances on `4k` candidates); hypotheses
 //! O(H · (1 + grow_steps) · n_obs) time and a residual table of O(H · N) memory (f32);
 //! each round O(K · H · N) for the label search plus O(K · n_obs) per ALS sweep of the
-//! refits and O(K² · n_obs) for the merge tests. Nothing is dense in F×N beyond what
+//! refits and O(K² · n_obs) for the merge tests; the spectral step O(n²·H + n³) on
+//! `n ≤ 1500` tracks. Nothing is dense in F×N beyond what
 //! [`TrackSubspace`] itself holds. The O(N²) neighbour pre-selection dominates beyond
 //! ~10⁴ tracks (see the long-video issue for a spatial index).
 
@@ -84,6 +92,7 @@ use crate::robust::ransac::Estimator;
 use crate::robust::subspace::{AffineSubspace, SubspaceConfig, TrackSubspace};
 use crate::{Error, Measurements, Result};
 
+mod spectral;
 #[cfg(test)]
 mod tests;
 
@@ -118,6 +127,10 @@ pub struct SegmentConfig {
     pub smoothness: f64,
     /// Maximum assign/refit rounds. Default 12.
     pub rounds: usize,
+    /// Whether spectral clustering of the tracks' preferences over the hypotheses adds
+    /// candidate groups to the pool (for 2 to `max_objects` groups, or the given count;
+    /// see `spectral`). Default true.
+    pub spectral: bool,
     /// ALS sweeps per refit. Default 15.
     pub refit_sweeps: usize,
     /// Multiplier of the BIC label cost `β_g` (1 = BIC). Default 1.
@@ -151,6 +164,7 @@ impl Default for SegmentConfig {
             grow_steps: 2,
             smoothness: 0.0,
             rounds: 12,
+            spectral: true,
             refit_sweeps: 15,
             label_cost_scale: 8.0,
             max_group_sigma: 2.0,
@@ -597,147 +611,94 @@ fn segment_tracks<R: Rng + ?Sized>(
     for (m, chi, s2) in fitted {
         pool.push(m, chi, s2);
     }
-
+    let n_sampled = pool.models.len();
     let given = matches!(cfg.objects, Objects::Count(_));
     let lambda = cfg.label_cost_scale * (n_obs.max(2) as f64).ln();
     let outlier: Vec<f64> = (0..n)
         .map(|p| 2.0 * info.k[p] * (area / (2.0 * std::f64::consts::PI)).ln())
         .collect();
     // The shared noise variance (when the groups share one σ): first the median of the
-    // hypotheses', then pooled over the groups' tracks each round.
-    let mut shared: Option<f64> = cfg
+    // sampled hypotheses', then pooled over the groups' tracks each round.
+    let shared0: Option<f64> = cfg
         .shared_noise
         .then(|| crate::eval::median(&pool.sigma2).max(info.sigma2_floor));
-    let mut chosen: Vec<usize> = Vec::new();
-    let mut energy = f64::INFINITY;
-    let mut rounds = 0;
-    let mut converged = false;
+
     // With a given count the automatic solution is found first, then brought to the
     // count (merges of the cheapest pairs, or additions) and refined with the count fixed:
     // forcing K labels from an empty set lands in poor local minima (measured: 16 % mean
     // error on the three-motion Hopkins files, against 8 % this way).
     let phases: Vec<Objects> = match cfg.objects {
-        Objects::Auto => vec![Objects::Auto],
-        Objects::Count(k) => vec![Objects::Auto, Objects::Count(k)],
+        Objects::Count(k) if !cfg.spectral => vec![Objects::Auto, Objects::Count(k)],
+        _ => vec![Objects::Auto],
     };
-    for objects in phases {
-        let fixed = matches!(objects, Objects::Count(_));
-        let target = match objects {
-            Objects::Count(k) => Some(k),
-            Objects::Auto => None,
-        };
-        energy = f64::INFINITY;
-        converged = false;
-        for _ in 0..cfg.rounds.max(1) {
-            rounds += 1;
-            let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
-            let picked = choose(&costs, &chosen, cfg, objects);
-            let e_picked = costs.energy(&picked);
-            // 4. Refit each chosen subspace to its tracks; its σ² from them.
-            let who = costs.smooth(&picked, &nbrs, cfg.smoothness);
-            let groups: Vec<Vec<usize>> = (0..picked.len())
-                .map(|i| (0..n).filter(|&p| who[p] == i).collect())
+    let ctx = Descent {
+        info: &info,
+        outlier: &outlier,
+        scored: &scored,
+        nbrs: &nbrs,
+        lambda,
+        cfg,
+    };
+    let mut best = descend(&mut pool, &ctx, shared0, Vec::new(), &phases, false);
+    let mut rounds = best.rounds;
+    // 5. With the count known (given, or the one just found), the groups are those of
+    //    spectral clustering of the tracks' preferences, refined locally (assign, refit;
+    //    no swaps): see `spectral` for why the energy does not choose between partitions
+    //    of one count.
+    let count = match cfg.objects {
+        Objects::Count(k) => k,
+        Objects::Auto => best.chosen.len(),
+    };
+    let mut spectral_result: Option<DescentResult> = None;
+    if cfg.spectral {
+        let sigma2 = crate::eval::median(&pool.sigma2[..n_sampled]).max(info.sigma2_floor);
+        let groups = (count >= 2)
+            .then(|| spectral_groups(&info, &pool, &eligible, count, sigma2, cfg, rng))
+            .flatten()
+            .filter(|g| g.len() == count);
+        if let Some(groups) = groups {
+            let start: Vec<usize> = groups
+                .into_iter()
+                .map(|(m, chi, s2)| pool.push(m, chi, s2))
                 .collect();
-            let refits: Vec<Option<Fitted>> = picked
-                .par_iter()
-                .zip(&groups)
-                .map(|(&h, g)| info.refit(&pool.models[h], g, sweeps))
-                .collect();
-            let mut next = Vec::with_capacity(picked.len());
-            for (i, r) in refits.into_iter().enumerate() {
-                match r {
-                    Some((m, chi, s2)) => next.push(pool.push(m, chi, s2)),
-                    None => next.push(picked[i]),
-                }
-            }
-            let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
-            let e_next = costs.energy(&next);
-            // Keep the refits when they lower the energy (they fit their tracks at least as
-            // well); stop when a round gains nothing.
-            let (mut set, mut e) = if e_next <= e_picked {
-                (next, e_next)
-            } else {
-                (picked, e_picked)
-            };
-            // 5. Merges: a pair of groups replaced by one subspace refitted to both, when that
-            //    lowers the energy (two pieces of one body, e.g. found on different frames), or,
-            //    with a given count still exceeded, the merge that raises it least.
-            if !fixed || target.is_some_and(|k| set.len() > k) {
-                loop {
-                    let forced = target.is_some_and(|k| set.len() > k);
-                    if fixed && !forced {
-                        break;
-                    }
-                    let costs =
-                        Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
-                    let (_, who) = costs.assign(&set);
-                    let pairs: Vec<(usize, usize)> = (0..set.len())
-                        .flat_map(|i| (i + 1..set.len()).map(move |j| (i, j)))
-                        .collect();
-                    let merged: Vec<Option<(usize, usize, Fitted)>> = pairs
-                        .par_iter()
-                        .map(|&(i, j)| {
-                            let union: Vec<usize> =
-                                (0..n).filter(|&p| who[p] == i || who[p] == j).collect();
-                            Some((i, j, info.refit(&pool.models[set[i]], &union, sweeps)?))
-                        })
-                        .collect();
-                    let mut best: Option<(f64, Vec<usize>)> = None;
-                    for (i, j, (m, chi, s2)) in merged.into_iter().flatten() {
-                        let h = pool.push(m, chi, s2);
-                        let mut t: Vec<usize> = set
-                            .iter()
-                            .enumerate()
-                            .filter(|&(k, _)| k != i && k != j)
-                            .map(|(_, &g)| g)
-                            .collect();
-                        t.push(h);
-                        let costs =
-                            Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
-                        let et = costs.energy(&t);
-                        if (forced || et < e) && best.as_ref().is_none_or(|b| et < b.0) {
-                            best = Some((et, t));
-                        }
-                    }
-                    match best {
-                        Some((et, t)) => {
-                            set = t;
-                            e = et;
-                        }
-                        None => break,
-                    }
-                }
-            }
-            chosen = set;
-            if shared.is_some() {
-                let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed);
-                let (_, who) = costs.assign(&chosen);
-                let (mut ss, mut dof) = (0.0, 0.0);
-                for p in 0..n {
-                    if who[p] != usize::MAX {
-                        ss += pool.chi[chosen[who[p]]][p] as f64;
-                        dof += info.nu[p];
-                    }
-                }
-                dof -= chosen
-                    .iter()
-                    .map(|&h| (8.0 * pool.defined_frames[h] as f64 - 9.0).max(0.0))
-                    .sum::<f64>();
-                if dof >= 1.0 {
-                    let s2 = (ss / dof).clamp(info.sigma2_floor, info.sigma2_max);
-                    shared = Some(s2);
-                    e = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, fixed)
-                        .energy(&chosen);
-                }
-            }
-            if !(e < energy - 1e-9 * energy.abs().max(1.0)) && energy.is_finite() {
-                energy = e.min(energy);
-                converged = true;
-                break;
-            }
-            energy = e;
+            let r = descend(
+                &mut pool,
+                &ctx,
+                shared0,
+                start,
+                &[Objects::Count(count)],
+                true,
+            );
+            rounds += r.rounds;
+            spectral_result = (r.chosen.len() == count).then_some(r);
         }
     }
+    match spectral_result {
+        Some(r) => best = r,
+        None if given && cfg.spectral => {
+            // No spectral partition of the given count: the automatic solution brought
+            // to the count, as without spectral clustering.
+            let r = descend(
+                &mut pool,
+                &ctx,
+                best.shared,
+                best.chosen.clone(),
+                &[cfg.objects],
+                false,
+            );
+            rounds += r.rounds;
+            best = r;
+        }
+        None => {}
+    }
+    let DescentResult {
+        chosen,
+        converged,
+        shared,
+        ..
+    } = best;
+    let energy =
+        Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, given).energy(&chosen);
 
     // Final labels and groups, largest first.
     let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, given);
@@ -802,6 +763,237 @@ fn segment_tracks<R: Rng + ?Sized>(
         converged,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// What every descent shares.
+struct Descent<'a, 'b> {
+    info: &'a TrackInfo<'b>,
+    outlier: &'a [f64],
+    scored: &'a [bool],
+    nbrs: &'a [Vec<usize>],
+    lambda: f64,
+    cfg: &'a SegmentConfig,
+}
+
+/// The outcome of one [`descend`].
+struct DescentResult {
+    chosen: Vec<usize>,
+    rounds: usize,
+    converged: bool,
+    shared: Option<f64>,
+}
+
+/// Steps 2–4 of the module documentation from the label set `start`: rounds of label
+/// search, refits and merges until `E` stops decreasing, through `phases` (the automatic
+/// count, then a given one). `local`: no label search (the set is kept, its subspaces only
+/// refitted to their tracks: k-subspaces). New refits are added to `pool`.
+fn descend(
+    pool: &mut Pool,
+    ctx: &Descent<'_, '_>,
+    mut shared: Option<f64>,
+    start: Vec<usize>,
+    phases: &[Objects],
+    local: bool,
+) -> DescentResult {
+    let Descent {
+        info,
+        outlier,
+        scored,
+        nbrs,
+        lambda,
+        cfg,
+    } = *ctx;
+    let n = info.ts.n_tracks();
+    let sweeps = cfg.refit_sweeps;
+    let mut chosen = start;
+    let mut rounds = 0;
+    let mut converged = false;
+    for &objects in phases {
+        let fixed = matches!(objects, Objects::Count(_));
+        let target = match objects {
+            Objects::Count(k) => Some(k),
+            Objects::Auto => None,
+        };
+        let mut energy = f64::INFINITY;
+        converged = false;
+        for _ in 0..cfg.rounds.max(1) {
+            rounds += 1;
+            let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
+            let picked = if local {
+                chosen.clone()
+            } else {
+                choose(&costs, &chosen, cfg, objects)
+            };
+            let e_picked = costs.energy(&picked);
+            // 4. Refit each chosen subspace to its tracks; its σ² from them.
+            let who = costs.smooth(&picked, nbrs, cfg.smoothness);
+            let groups: Vec<Vec<usize>> = (0..picked.len())
+                .map(|i| (0..n).filter(|&p| who[p] == i).collect())
+                .collect();
+            let refits: Vec<Option<Fitted>> = picked
+                .par_iter()
+                .zip(&groups)
+                .map(|(&h, g)| info.refit(&pool.models[h], g, sweeps))
+                .collect();
+            let mut next = Vec::with_capacity(picked.len());
+            for (i, r) in refits.into_iter().enumerate() {
+                match r {
+                    Some((m, chi, s2)) => next.push(pool.push(m, chi, s2)),
+                    None => next.push(picked[i]),
+                }
+            }
+            let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
+            let e_next = costs.energy(&next);
+            // Keep the refits when they lower the energy (they fit their tracks at least as
+            // well); stop when a round gains nothing.
+            let (mut set, mut e) = if e_next <= e_picked {
+                (next, e_next)
+            } else {
+                (picked, e_picked)
+            };
+            // 5. Merges: a pair of groups replaced by one subspace refitted to both, when that
+            //    lowers the energy (two pieces of one body, e.g. found on different frames), or,
+            //    with a given count still exceeded, the merge that raises it least.
+            if !fixed || target.is_some_and(|k| set.len() > k) {
+                loop {
+                    let forced = target.is_some_and(|k| set.len() > k);
+                    if fixed && !forced {
+                        break;
+                    }
+                    let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
+                    let (_, who) = costs.assign(&set);
+                    let pairs: Vec<(usize, usize)> = (0..set.len())
+                        .flat_map(|i| (i + 1..set.len()).map(move |j| (i, j)))
+                        .collect();
+                    let merged: Vec<Option<(usize, usize, Fitted)>> = pairs
+                        .par_iter()
+                        .map(|&(i, j)| {
+                            let union: Vec<usize> =
+                                (0..n).filter(|&p| who[p] == i || who[p] == j).collect();
+                            Some((i, j, info.refit(&pool.models[set[i]], &union, sweeps)?))
+                        })
+                        .collect();
+                    let mut best: Option<(f64, Vec<usize>)> = None;
+                    for (i, j, (m, chi, s2)) in merged.into_iter().flatten() {
+                        let h = pool.push(m, chi, s2);
+                        let mut t: Vec<usize> = set
+                            .iter()
+                            .enumerate()
+                            .filter(|&(k, _)| k != i && k != j)
+                            .map(|(_, &g)| g)
+                            .collect();
+                        t.push(h);
+                        let costs =
+                            Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
+                        let et = costs.energy(&t);
+                        if (forced || et < e) && best.as_ref().is_none_or(|b| et < b.0) {
+                            best = Some((et, t));
+                        }
+                    }
+                    match best {
+                        Some((et, t)) => {
+                            set = t;
+                            e = et;
+                        }
+                        None => break,
+                    }
+                }
+            }
+            chosen = set;
+            if shared.is_some() {
+                let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
+                let (_, who) = costs.assign(&chosen);
+                let (mut ss, mut dof) = (0.0, 0.0);
+                for p in 0..n {
+                    if who[p] != usize::MAX {
+                        ss += pool.chi[chosen[who[p]]][p] as f64;
+                        dof += info.nu[p];
+                    }
+                }
+                dof -= chosen
+                    .iter()
+                    .map(|&h| (8.0 * pool.defined_frames[h] as f64 - 9.0).max(0.0))
+                    .sum::<f64>();
+                if dof >= 1.0 {
+                    let s2 = (ss / dof).clamp(info.sigma2_floor, info.sigma2_max);
+                    shared = Some(s2);
+                    e = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed)
+                        .energy(&chosen);
+                }
+            }
+            if !(e < energy - 1e-9 * energy.abs().max(1.0)) && energy.is_finite() {
+                converged = true;
+                break;
+            }
+            energy = e;
+        }
+    }
+    DescentResult {
+        chosen,
+        rounds,
+        converged,
+        shared,
+    }
+}
+
+/// Subspaces refitted to the `k` groups of spectral clustering ([`spectral`]) of
+/// `eligible` (a random subset of [`spectral::MAX_TRACKS`] when there are more), the
+/// kernel scaled by the noise variance `sigma2`; each group's refit starts from the pool
+/// hypothesis that fits it best. Groups below `min_group_tracks` or whose refit fails are
+/// left out. `None` when the embedding fails.
+fn spectral_groups<R: Rng + ?Sized>(
+    info: &TrackInfo<'_>,
+    pool: &Pool,
+    eligible: &[usize],
+    k: usize,
+    sigma2: f64,
+    cfg: &SegmentConfig,
+    rng: &mut R,
+) -> Option<Vec<Fitted>> {
+    let mut tracks = eligible.to_vec();
+    if tracks.len() > spectral::MAX_TRACKS {
+        for i in 0..spectral::MAX_TRACKS {
+            let j = rng.random_range(i..tracks.len());
+            tracks.swap(i, j);
+        }
+        tracks.truncate(spectral::MAX_TRACKS);
+        tracks.sort_unstable();
+    }
+    let r2: Vec<Vec<f32>> = pool
+        .chi
+        .iter()
+        .map(|c| {
+            c.iter()
+                .zip(&info.nu)
+                .map(|(&x, &nu)| {
+                    if nu > 0.0 {
+                        x / nu as f32
+                    } else {
+                        f32::INFINITY
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let sp = spectral::Spectral::new(&r2, sigma2, tracks, k)?;
+    let groups: Vec<Vec<usize>> = sp
+        .clusters(k, 10, rng)
+        .into_iter()
+        .filter(|g| g.len() >= cfg.min_group_tracks.max(4))
+        .collect();
+    Some(
+        groups
+            .par_iter()
+            .filter_map(|g| {
+                let h0 = (0..pool.models.len()).min_by(|&a, &b| {
+                    let sa: f64 = g.iter().map(|&p| pool.chi[a][p] as f64).sum();
+                    let sb: f64 = g.iter().map(|&p| pool.chi[b][p] as f64).sum();
+                    sa.total_cmp(&sb)
+                })?;
+                info.refit(&pool.models[h0], g, cfg.refit_sweeps)
+            })
+            .collect(),
+    )
 }
 
 /// Label set search (step 3): greedy additions, then removals and swaps, each accepted
@@ -1155,6 +1347,13 @@ pub fn other_objects<R: Rng + ?Sized>(
     // One estimator over the candidates serves the segmentation and both fits below (a
     // track's fit to `main` depends only on the track and the frames).
     let ts = TrackSubspace::new(&sub, &cfg.subspace);
+    // Without the spectral partition: the candidates are mostly junk (random walks,
+    // sliding tracks), whose groups the energy's count includes, and repartitioning them
+    // spectrally split the object (Hopkins `cars1`: three groups seen instead of two).
+    let cfg = &SegmentConfig {
+        spectral: false,
+        ..cfg.clone()
+    };
     let seg = match segment_tracks(&ts, cfg, rng, Instant::now()) {
         Ok(s) => s,
         Err(Error::TooFew { .. }) | Err(Error::Degenerate(_)) => return Ok(Vec::new()),
