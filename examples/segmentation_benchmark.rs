@@ -9,7 +9,9 @@
 //! ```
 //! Environment: `RANK3_DATASETS` (data-set directory), `HIDE` (fractions hidden, default
 //! `0.2,0.5`), `WALKS` (random-walk tracks added as a fraction of the tracks, default 0.1),
-//! `SEED` (default 1).
+//! `SEED` (default 1), `SPECTRAL=0` (the energy alone, without the spectral partition at
+//! the count), `LABEL_COST`, `HYPOTHESES`, `NEIGHBOURS`, `GROW`, `SMOOTH` (the
+//! `SegmentConfig` fields of those names).
 
 use std::time::Instant;
 
