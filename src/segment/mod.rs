@@ -127,9 +127,10 @@ pub struct SegmentConfig {
     pub smoothness: f64,
     /// Maximum assign/refit rounds. Default 12.
     pub rounds: usize,
-    /// Whether spectral clustering of the tracks' preferences over the hypotheses adds
-    /// candidate groups to the pool (for 2 to `max_objects` groups, or the given count;
-    /// see `spectral`). Default true.
+    /// Whether the groups at the count (given, or found by the energy) are those of
+    /// spectral clustering of the tracks' preferences over the hypotheses, refined locally
+    /// (step 4 of the module documentation; see `spectral`). Off: the energy's own
+    /// partition. Default true.
     pub spectral: bool,
     /// ALS sweeps per refit. Default 15.
     pub refit_sweeps: usize,
@@ -623,14 +624,7 @@ fn segment_tracks<R: Rng + ?Sized>(
         .shared_noise
         .then(|| crate::eval::median(&pool.sigma2).max(info.sigma2_floor));
 
-    // With a given count the automatic solution is found first, then brought to the
-    // count (merges of the cheapest pairs, or additions) and refined with the count fixed:
-    // forcing K labels from an empty set lands in poor local minima (measured: 16 % mean
-    // error on the three-motion Hopkins files, against 8 % this way).
-    let phases: Vec<Objects> = match cfg.objects {
-        Objects::Count(k) if !cfg.spectral => vec![Objects::Auto, Objects::Count(k)],
-        _ => vec![Objects::Auto],
-    };
+    // The automatic solution comes first, with a given count too.
     let ctx = Descent {
         info: &info,
         outlier: &outlier,
@@ -639,7 +633,7 @@ fn segment_tracks<R: Rng + ?Sized>(
         lambda,
         cfg,
     };
-    let mut best = descend(&mut pool, &ctx, shared0, Vec::new(), &phases, false);
+    let mut best = descend(&mut pool, &ctx, shared0, Vec::new(), Objects::Auto, false);
     let mut rounds = best.rounds;
     // 5. With the count known (given, or the one just found), the groups are those of
     //    spectral clustering of the tracks' preferences, refined locally (assign, refit;
@@ -661,29 +655,25 @@ fn segment_tracks<R: Rng + ?Sized>(
                 .into_iter()
                 .map(|(m, chi, s2)| pool.push(m, chi, s2))
                 .collect();
-            let r = descend(
-                &mut pool,
-                &ctx,
-                shared0,
-                start,
-                &[Objects::Count(count)],
-                true,
-            );
+            let r = descend(&mut pool, &ctx, shared0, start, Objects::Count(count), true);
             rounds += r.rounds;
             spectral_result = (r.chosen.len() == count).then_some(r);
         }
     }
     match spectral_result {
         Some(r) => best = r,
-        None if given && cfg.spectral => {
-            // No spectral partition of the given count: the automatic solution brought
-            // to the count, as without spectral clustering.
+        None if given => {
+            // Without a spectral partition of the given count (spectral clustering off, or
+            // a group missing), the automatic solution is brought to the count (merges of
+            // the cheapest pairs, or additions) and refined with the count fixed: forcing
+            // K labels from an empty set lands in poor local minima (measured: 16 % mean
+            // error on the three-motion Hopkins files, against 8 % this way).
             let r = descend(
                 &mut pool,
                 &ctx,
                 best.shared,
                 best.chosen.clone(),
-                &[cfg.objects],
+                cfg.objects,
                 false,
             );
             rounds += r.rounds;
@@ -697,11 +687,10 @@ fn segment_tracks<R: Rng + ?Sized>(
         shared,
         ..
     } = best;
-    let energy =
-        Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, given).energy(&chosen);
 
     // Final labels and groups, largest first.
     let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, given);
+    let energy = costs.energy(&chosen);
     let who = costs.smooth(&chosen, &nbrs, cfg.smoothness);
     let mut groups: Vec<(usize, Vec<usize>)> = chosen
         .iter()
@@ -783,16 +772,16 @@ struct DescentResult {
     shared: Option<f64>,
 }
 
-/// Steps 2–4 of the module documentation from the label set `start`: rounds of label
-/// search, refits and merges until `E` stops decreasing, through `phases` (the automatic
-/// count, then a given one). `local`: no label search (the set is kept, its subspaces only
-/// refitted to their tracks: k-subspaces). New refits are added to `pool`.
+/// Steps 2–3 of the module documentation from the label set `start`: rounds of label
+/// search, refits and merges until `E` stops decreasing, with the count `objects` (found,
+/// or fixed). `local`: no label search (the set is kept, its subspaces only refitted to
+/// their tracks: k-subspaces). New refits are added to `pool`.
 fn descend(
     pool: &mut Pool,
     ctx: &Descent<'_, '_>,
     mut shared: Option<f64>,
     start: Vec<usize>,
-    phases: &[Objects],
+    objects: Objects,
     local: bool,
 ) -> DescentResult {
     let Descent {
@@ -808,125 +797,121 @@ fn descend(
     let mut chosen = start;
     let mut rounds = 0;
     let mut converged = false;
-    for &objects in phases {
-        let fixed = matches!(objects, Objects::Count(_));
-        let target = match objects {
-            Objects::Count(k) => Some(k),
-            Objects::Auto => None,
+    let fixed = matches!(objects, Objects::Count(_));
+    let target = match objects {
+        Objects::Count(k) => Some(k),
+        Objects::Auto => None,
+    };
+    let mut energy = f64::INFINITY;
+    for _ in 0..cfg.rounds.max(1) {
+        rounds += 1;
+        let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
+        let picked = if local {
+            chosen.clone()
+        } else {
+            choose(&costs, &chosen, cfg, objects)
         };
-        let mut energy = f64::INFINITY;
-        converged = false;
-        for _ in 0..cfg.rounds.max(1) {
-            rounds += 1;
-            let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
-            let picked = if local {
-                chosen.clone()
-            } else {
-                choose(&costs, &chosen, cfg, objects)
-            };
-            let e_picked = costs.energy(&picked);
-            // 4. Refit each chosen subspace to its tracks; its σ² from them.
-            let who = costs.smooth(&picked, nbrs, cfg.smoothness);
-            let groups: Vec<Vec<usize>> = (0..picked.len())
-                .map(|i| (0..n).filter(|&p| who[p] == i).collect())
-                .collect();
-            let refits: Vec<Option<Fitted>> = picked
-                .par_iter()
-                .zip(&groups)
-                .map(|(&h, g)| info.refit(&pool.models[h], g, sweeps))
-                .collect();
-            let mut next = Vec::with_capacity(picked.len());
-            for (i, r) in refits.into_iter().enumerate() {
-                match r {
-                    Some((m, chi, s2)) => next.push(pool.push(m, chi, s2)),
-                    None => next.push(picked[i]),
-                }
+        let e_picked = costs.energy(&picked);
+        // 4. Refit each chosen subspace to its tracks; its σ² from them.
+        let who = costs.smooth(&picked, nbrs, cfg.smoothness);
+        let groups: Vec<Vec<usize>> = (0..picked.len())
+            .map(|i| (0..n).filter(|&p| who[p] == i).collect())
+            .collect();
+        let refits: Vec<Option<Fitted>> = picked
+            .par_iter()
+            .zip(&groups)
+            .map(|(&h, g)| info.refit(&pool.models[h], g, sweeps))
+            .collect();
+        let mut next = Vec::with_capacity(picked.len());
+        for (i, r) in refits.into_iter().enumerate() {
+            match r {
+                Some((m, chi, s2)) => next.push(pool.push(m, chi, s2)),
+                None => next.push(picked[i]),
             }
-            let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
-            let e_next = costs.energy(&next);
-            // Keep the refits when they lower the energy (they fit their tracks at least as
-            // well); stop when a round gains nothing.
-            let (mut set, mut e) = if e_next <= e_picked {
-                (next, e_next)
-            } else {
-                (picked, e_picked)
-            };
-            // 5. Merges: a pair of groups replaced by one subspace refitted to both, when that
-            //    lowers the energy (two pieces of one body, e.g. found on different frames), or,
-            //    with a given count still exceeded, the merge that raises it least.
-            if !fixed || target.is_some_and(|k| set.len() > k) {
-                loop {
-                    let forced = target.is_some_and(|k| set.len() > k);
-                    if fixed && !forced {
-                        break;
-                    }
-                    let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
-                    let (_, who) = costs.assign(&set);
-                    let pairs: Vec<(usize, usize)> = (0..set.len())
-                        .flat_map(|i| (i + 1..set.len()).map(move |j| (i, j)))
-                        .collect();
-                    let merged: Vec<Option<(usize, usize, Fitted)>> = pairs
-                        .par_iter()
-                        .map(|&(i, j)| {
-                            let union: Vec<usize> =
-                                (0..n).filter(|&p| who[p] == i || who[p] == j).collect();
-                            Some((i, j, info.refit(&pool.models[set[i]], &union, sweeps)?))
-                        })
-                        .collect();
-                    let mut best: Option<(f64, Vec<usize>)> = None;
-                    for (i, j, (m, chi, s2)) in merged.into_iter().flatten() {
-                        let h = pool.push(m, chi, s2);
-                        let mut t: Vec<usize> = set
-                            .iter()
-                            .enumerate()
-                            .filter(|&(k, _)| k != i && k != j)
-                            .map(|(_, &g)| g)
-                            .collect();
-                        t.push(h);
-                        let costs =
-                            Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
-                        let et = costs.energy(&t);
-                        if (forced || et < e) && best.as_ref().is_none_or(|b| et < b.0) {
-                            best = Some((et, t));
-                        }
-                    }
-                    match best {
-                        Some((et, t)) => {
-                            set = t;
-                            e = et;
-                        }
-                        None => break,
-                    }
-                }
-            }
-            chosen = set;
-            if shared.is_some() {
-                let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
-                let (_, who) = costs.assign(&chosen);
-                let (mut ss, mut dof) = (0.0, 0.0);
-                for p in 0..n {
-                    if who[p] != usize::MAX {
-                        ss += pool.chi[chosen[who[p]]][p] as f64;
-                        dof += info.nu[p];
-                    }
-                }
-                dof -= chosen
-                    .iter()
-                    .map(|&h| (8.0 * pool.defined_frames[h] as f64 - 9.0).max(0.0))
-                    .sum::<f64>();
-                if dof >= 1.0 {
-                    let s2 = (ss / dof).clamp(info.sigma2_floor, info.sigma2_max);
-                    shared = Some(s2);
-                    e = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed)
-                        .energy(&chosen);
-                }
-            }
-            if !(e < energy - 1e-9 * energy.abs().max(1.0)) && energy.is_finite() {
-                converged = true;
-                break;
-            }
-            energy = e;
         }
+        let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
+        let e_next = costs.energy(&next);
+        // Keep the refits when they lower the energy (they fit their tracks at least as
+        // well); stop when a round gains nothing.
+        let (mut set, mut e) = if e_next <= e_picked {
+            (next, e_next)
+        } else {
+            (picked, e_picked)
+        };
+        // 5. Merges: a pair of groups replaced by one subspace refitted to both, when that
+        //    lowers the energy (two pieces of one body, e.g. found on different frames), or,
+        //    with a given count still exceeded, the merge that raises it least.
+        if !fixed || target.is_some_and(|k| set.len() > k) {
+            loop {
+                let forced = target.is_some_and(|k| set.len() > k);
+                if fixed && !forced {
+                    break;
+                }
+                let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
+                let (_, who) = costs.assign(&set);
+                let pairs: Vec<(usize, usize)> = (0..set.len())
+                    .flat_map(|i| (i + 1..set.len()).map(move |j| (i, j)))
+                    .collect();
+                let merged: Vec<Option<(usize, usize, Fitted)>> = pairs
+                    .par_iter()
+                    .map(|&(i, j)| {
+                        let union: Vec<usize> =
+                            (0..n).filter(|&p| who[p] == i || who[p] == j).collect();
+                        Some((i, j, info.refit(&pool.models[set[i]], &union, sweeps)?))
+                    })
+                    .collect();
+                let mut best: Option<(f64, Vec<usize>)> = None;
+                for (i, j, (m, chi, s2)) in merged.into_iter().flatten() {
+                    let h = pool.push(m, chi, s2);
+                    let mut t: Vec<usize> = set
+                        .iter()
+                        .enumerate()
+                        .filter(|&(k, _)| k != i && k != j)
+                        .map(|(_, &g)| g)
+                        .collect();
+                    t.push(h);
+                    let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
+                    let et = costs.energy(&t);
+                    if (forced || et < e) && best.as_ref().is_none_or(|b| et < b.0) {
+                        best = Some((et, t));
+                    }
+                }
+                match best {
+                    Some((et, t)) => {
+                        set = t;
+                        e = et;
+                    }
+                    None => break,
+                }
+            }
+        }
+        chosen = set;
+        if shared.is_some() {
+            let costs = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed);
+            let (_, who) = costs.assign(&chosen);
+            let (mut ss, mut dof) = (0.0, 0.0);
+            for p in 0..n {
+                if who[p] != usize::MAX {
+                    ss += pool.chi[chosen[who[p]]][p] as f64;
+                    dof += info.nu[p];
+                }
+            }
+            dof -= chosen
+                .iter()
+                .map(|&h| (8.0 * pool.defined_frames[h] as f64 - 9.0).max(0.0))
+                .sum::<f64>();
+            if dof >= 1.0 {
+                let s2 = (ss / dof).clamp(info.sigma2_floor, info.sigma2_max);
+                shared = Some(s2);
+                e = Costs::new(pool, shared, &info.k, outlier, scored, lambda, fixed)
+                    .energy(&chosen);
+            }
+        }
+        if !(e < energy - 1e-9 * energy.abs().max(1.0)) && energy.is_finite() {
+            converged = true;
+            break;
+        }
+        energy = e;
     }
     DescentResult {
         chosen,
@@ -959,23 +944,16 @@ fn spectral_groups<R: Rng + ?Sized>(
         tracks.truncate(spectral::MAX_TRACKS);
         tracks.sort_unstable();
     }
-    let r2: Vec<Vec<f32>> = pool
-        .chi
-        .iter()
-        .map(|c| {
-            c.iter()
-                .zip(&info.nu)
-                .map(|(&x, &nu)| {
-                    if nu > 0.0 {
-                        x / nu as f32
-                    } else {
-                        f32::INFINITY
-                    }
-                })
-                .collect()
-        })
-        .collect();
-    let sp = spectral::Spectral::new(&r2, sigma2, tracks, k)?;
+    // Per-coordinate squared residuals `r²_ph = (ν_p r²_ph) / ν_p`, read from the pool.
+    let r2 = |h: usize, p: usize| {
+        let nu = info.nu[p];
+        if nu > 0.0 {
+            pool.chi[h][p] / nu as f32
+        } else {
+            f32::INFINITY
+        }
+    };
+    let sp = spectral::Spectral::new(r2, pool.models.len(), sigma2, tracks, k)?;
     let groups: Vec<Vec<usize>> = sp
         .clusters(k, 10, rng)
         .into_iter()

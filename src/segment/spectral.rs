@@ -60,14 +60,19 @@ pub struct Spectral {
 }
 
 impl Spectral {
-    /// The spectral embedding of `tracks` under the pool's residuals: `r2[h][p]` is the
-    /// per-coordinate squared residual of track `p` under hypothesis `h`
+    /// The spectral embedding of `tracks` under the pool's residuals: `r2(h, p)` is the
+    /// per-coordinate squared residual of track `p` under hypothesis `h < h_all`
     /// (`f32::INFINITY` when not scorable), `sigma2` the noise variance `σ̂²`. `None` when
     /// fewer than 4 tracks or 2 hypotheses, or the eigendecomposition fails. Keeps `k_max`
     /// eigenvectors.
-    pub fn new(r2: &[Vec<f32>], sigma2: f64, tracks: Vec<usize>, k_max: usize) -> Option<Self> {
+    pub fn new(
+        r2: impl Fn(usize, usize) -> f32,
+        h_all: usize,
+        sigma2: f64,
+        tracks: Vec<usize>,
+        k_max: usize,
+    ) -> Option<Self> {
         let n = tracks.len();
-        let h_all = r2.len();
         if n < 4 || h_all < 2 || !(sigma2 > 0.0 && sigma2.is_finite()) {
             return None;
         }
@@ -78,8 +83,8 @@ impl Spectral {
             let s2 = tau2 * sigma2;
             for (i, &p) in tracks.iter().enumerate() {
                 let mut norm = 0.0;
-                for (h, r) in r2.iter().enumerate() {
-                    let r = r[p];
+                for h in 0..h_all {
+                    let r = r2(h, p);
                     let v = if r.is_finite() {
                         (-(r as f64) / s2).exp()
                     } else {
@@ -252,7 +257,7 @@ mod tests {
                     .collect()
             })
             .collect();
-        let sp = Spectral::new(&r2, 1.0, (0..n).collect(), 3).unwrap();
+        let sp = Spectral::new(|hh, p| r2[hh][p], h, 1.0, (0..n).collect(), 3).unwrap();
         assert!((sp.eigenvalues[0] - 1.0).abs() < 1e-9);
         assert!(sp.eigenvalues[1] > 0.9, "{:?}", &sp.eigenvalues[..3]);
         assert!(sp.eigenvalues[2] < 0.5, "{:?}", &sp.eigenvalues[..3]);
