@@ -181,6 +181,10 @@ pub struct CompletionReport {
     pub rms_px: f64,
     pub status: SolverStatus,
     pub iterations: usize,
+    /// Alternating least-squares sweeps run before `solver` because its iterations would
+    /// be costly on this table (`completion.als_first_flops`); 0 when it ran alone. When
+    /// the sweeps converged, `iterations` is 0.
+    pub als_sweeps_first: usize,
     pub runs: usize,
     pub seconds: f64,
 }
@@ -1951,6 +1955,7 @@ fn fit_selection(
                 rms_px: c.rms,
                 status: c.report.status,
                 iterations: c.report.iterations,
+                als_sweeps_first: c.als_sweeps_first,
                 runs: c.runs.len(),
                 seconds: c.report.seconds,
             });

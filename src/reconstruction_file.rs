@@ -328,6 +328,9 @@ pub struct CompletionRecord {
     pub rms_px: f64,
     pub status: SolverStatus,
     pub iterations: usize,
+    /// ALS sweeps run before `solver` on a big table (absent in files written before it).
+    #[serde(default)]
+    pub als_sweeps_first: usize,
     pub runs: usize,
     #[serde(deserialize_with = "nullable")]
     pub seconds: f64,

@@ -159,12 +159,21 @@ pub fn print_report(rec: &Reconstruction) {
     }
     if let Some(c) = &rec.completion {
         info!(
-            "completion: {} ({} model) affine RMS {:.6} px, {} after {} iterations, {:.2} s",
+            "completion: {} ({} model) affine RMS {:.6} px, {} after {} iterations{}, {:.2} s",
             c.solver.name(),
             spelled(&c.model),
             c.rms_px,
             spelled(&c.status),
             c.iterations,
+            if c.als_sweeps_first > 0 {
+                format!(
+                    " (after {} ALS sweeps first: its iterations would be costly, \
+                     completion.als_first_flops)",
+                    c.als_sweeps_first
+                )
+            } else {
+                String::new()
+            },
             c.seconds
         );
         detail!("completion: {} run(s), the best kept", c.runs);

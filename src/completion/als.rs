@@ -30,11 +30,13 @@
 //! # Complexity
 //!
 //! One sweep costs `O(n_obs q² + (F + N) q³)` (`n_obs` observed pairs, `q` = r or r+1),
-//! plus `O(F r²)` for the re-orthonormalisation. Never `O(F N)`.
+//! plus `O(F r²)` for the re-orthonormalisation. Never `O(F N)`. The per-frame and per-track
+//! solves run in parallel (rayon).
 
 use std::time::Instant;
 
 use faer::MatRef;
+use rayon::prelude::*;
 
 use super::{CompletionConfig, CompletionProblem, CompletionRun, CompletionSolver, linalg, report};
 use crate::{Observer, SolverStatus};
@@ -64,16 +66,14 @@ impl Als {
         }
     }
 
-    /// Camera update given points (in place on the packed cameras `u`).
+    /// Camera update given points (in place on the packed cameras `u`). Frames are
+    /// independent: in parallel.
     fn update_cameras(&self, problem: &CompletionProblem, s: &[f64], u: &mut [f64]) {
         let (q, r) = (problem.q(), problem.rank);
-        let mut b = vec![0.0; q * q];
-        let mut rhs = [vec![0.0; q], vec![0.0; q]];
-        let mut sbar = vec![0.0; q];
-        for f in 0..problem.n_frames {
-            b.iter_mut().for_each(|x| *x = 0.0);
-            rhs.iter_mut()
-                .for_each(|v| v.iter_mut().for_each(|x| *x = 0.0));
+        u.par_chunks_mut(2 * q).enumerate().for_each(|(f, uf)| {
+            let mut b = vec![0.0; q * q];
+            let mut rhs = [vec![0.0; q], vec![0.0; q]];
+            let mut sbar = vec![0.0; q];
             for o in problem.row_ptr[f]..problem.row_ptr[f + 1] {
                 let p = problem.row_track[o];
                 sbar[..r].copy_from_slice(&s[p * r..(p + 1) * r]);
@@ -99,10 +99,10 @@ impl Als {
             for (k, rk) in rhs.iter_mut().enumerate() {
                 let mut bf = b.clone();
                 if linalg::spd_solve_robust(&mut bf, q, rk) {
-                    u[(2 * f + k) * q..(2 * f + k + 1) * q].copy_from_slice(rk);
+                    uf[k * q..(k + 1) * q].copy_from_slice(rk);
                 }
             }
-        }
+        });
     }
 }
 

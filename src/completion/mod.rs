@@ -77,6 +77,7 @@ use faer::{Mat, MatRef};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use als::Als;
@@ -237,6 +238,17 @@ pub struct CompletionConfig {
     /// with 70 % hidden; 3 sweeps fix dino only, 5–30 fix both (measured; 200 sweeps drift
     /// into a poor basin again on the hotel case).
     pub impute_iterations: usize,
+    /// Wiberg: when one of its iterations would cost more than this many floating-point
+    /// operations (estimated as `Σ_p (2 k_p q)² r + (2Fq)³/3`, the reduced camera system's
+    /// assembly over tracks seen in `k_p` frames plus its Cholesky factorisation; `O(F N k)`
+    /// for tracks as long as the sequence), alternating least squares runs first from the
+    /// same start (`O(n_obs q²)` per sweep), and the Wiberg iterations continue from where
+    /// it ended only when it did not converge (stalled or hit the cap). `f64::INFINITY`:
+    /// the Wiberg solver alone. Default `1e10` (about one second per Wiberg iteration on
+    /// two cores): every data set of docs/results.md below 300 × 10 000 runs Wiberg alone;
+    /// on 300 × 10 000 with 40 % missing (6·10¹⁰ per iteration, 4.6 s) ALS converges to the
+    /// same RMS in 15 sweeps, 4.7 s in all against 42 s (docs/results.md).
+    pub als_first_flops: f64,
 }
 
 impl Default for CompletionConfig {
@@ -263,6 +275,7 @@ impl Default for CompletionConfig {
             creep_tolerance: 1e-3,
             geodesic_acceleration: 0.75,
             impute_iterations: 10,
+            als_first_flops: 1e10,
         }
     }
 }
@@ -296,6 +309,15 @@ impl CompletionConfig {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(field, format!("must be finite and non-negative, got {v}"));
             }
+        }
+        if self.als_first_flops.is_nan() || self.als_first_flops < 0.0 {
+            return bad(
+                "als_first_flops",
+                format!(
+                    "must be non-negative (infinity: never), got {}",
+                    self.als_first_flops
+                ),
+            );
         }
         if !(self.point_damping_decrease.is_finite()
             && (0.0..1.0).contains(&self.point_damping_decrease))
@@ -346,6 +368,9 @@ pub struct Completion {
     pub runs: Vec<SolverReport>,
     /// Index of the best run in `runs`.
     pub best_run: usize,
+    /// ALS sweeps of the best run before its solver ([`CompletionConfig::als_first_flops`]);
+    /// 0 when the solver ran alone. When they converged, the solver ran no iteration.
+    pub als_sweeps_first: usize,
 }
 
 impl Completion {
@@ -681,6 +706,22 @@ impl CompletionProblem {
         self.col_frame.len()
     }
     /// Camera parameters per matrix row: `r + 1` (affine) or `r`.
+    /// Estimated floating-point operations of one Wiberg iteration: the reduced camera
+    /// system's assembly, `Σ_p (2 k_p q)² r` over tracks seen in `k_p` frames, plus its
+    /// dense Cholesky factorisation, `(2Fq)³/3`. `O(N)`.
+    pub fn wiberg_iteration_flops(&self) -> f64 {
+        let (q, r) = (self.q() as f64, self.rank as f64);
+        let assembly: f64 = self
+            .col_ptr
+            .windows(2)
+            .map(|w| {
+                let k = (w[1] - w[0]) as f64;
+                (2.0 * k * q).powi(2) * r
+            })
+            .sum();
+        assembly + (2.0 * self.n_frames as f64 * q).powi(3) / 3.0
+    }
+
     pub(crate) fn q(&self) -> usize {
         self.rank + usize::from(self.affine)
     }
@@ -777,7 +818,7 @@ impl CompletionProblem {
         mu_rel: f64,
         want_inverse: bool,
     ) -> PointSolve {
-        let (q, r) = (self.q(), self.rank);
+        let r = self.rank;
         let np = self.n_points;
         let mut s = vec![0.0; np * r];
         let mut res = vec![0.0; 2 * self.n_observed()];
@@ -786,15 +827,73 @@ impl CompletionProblem {
         } else {
             Vec::new()
         };
+        // Tracks are independent: blocks of them in parallel, each block writing its own
+        // slices; the block sums are added in block order (the result does not depend on
+        // the number of threads).
+        let blocks: Vec<(usize, usize)> = (0..np)
+            .step_by(POINT_BLOCK)
+            .map(|lo| (lo, (lo + POINT_BLOCK).min(np)))
+            .collect();
+        let mut res_parts = Vec::with_capacity(blocks.len());
+        let mut rest = res.as_mut_slice();
+        for &(lo, hi) in &blocks {
+            let (head, tail) = rest.split_at_mut(2 * (self.col_ptr[hi] - self.col_ptr[lo]));
+            res_parts.push(head);
+            rest = tail;
+        }
+        let mut ainv_parts: Vec<&mut [f64]> = if want_inverse {
+            ainv.chunks_mut(POINT_BLOCK * r * r).collect()
+        } else {
+            blocks.iter().map(|_| <&mut [f64]>::default()).collect()
+        };
+        let sums: Vec<(f64, f64)> = s
+            .par_chunks_mut(POINT_BLOCK * r)
+            .zip(res_parts.par_iter_mut())
+            .zip(ainv_parts.par_iter_mut())
+            .zip(blocks.par_iter())
+            .map(|(((s_blk, res_blk), ainv_blk), &(lo, hi))| {
+                self.solve_point_block(u, mu, mu_rel, lo, hi, s_blk, res_blk, ainv_blk)
+            })
+            .collect();
+        let (cost, reg) = sums
+            .iter()
+            .fold((0.0, 0.0), |(c, g), (c2, g2)| (c + c2, g + g2));
+        PointSolve {
+            s,
+            res,
+            ainv,
+            cost,
+            reg,
+        }
+    }
+
+    /// [`Self::solve_points`] for tracks `lo..hi`, writing their points, residuals and
+    /// (when `ainv` is not empty) inverse normal matrices into the block's slices. Returns
+    /// the block's `(cost, reg)`.
+    #[allow(clippy::too_many_arguments)]
+    fn solve_point_block(
+        &self,
+        u: &[f64],
+        mu: f64,
+        mu_rel: f64,
+        lo: usize,
+        hi: usize,
+        s: &mut [f64],
+        res: &mut [f64],
+        ainv: &mut [f64],
+    ) -> (f64, f64) {
+        let (q, r) = (self.q(), self.rank);
+        let want_inverse = !ainv.is_empty();
+        let o0 = self.col_ptr[lo];
         let mut a = vec![0.0; r * r];
         let mut b = vec![0.0; r];
         let mut cost = 0.0;
         let mut reg = 0.0;
-        for p in 0..np {
+        for p in lo..hi {
             a.iter_mut().for_each(|x| *x = 0.0);
             b.iter_mut().for_each(|x| *x = 0.0);
-            let (lo, hi) = (self.col_ptr[p], self.col_ptr[p + 1]);
-            for o in lo..hi {
+            let (olo, ohi) = (self.col_ptr[p], self.col_ptr[p + 1]);
+            for o in olo..ohi {
                 let f = self.col_frame[o];
                 for k in 0..2 {
                     let row = &u[(2 * f + k) * q..(2 * f + k + 1) * q];
@@ -814,7 +913,7 @@ impl CompletionProblem {
                 }
                 a[c * r + c] += ridge;
             }
-            let sp = &mut s[p * r..(p + 1) * r];
+            let sp = &mut s[(p - lo) * r..(p - lo + 1) * r];
             sp.copy_from_slice(&b);
             let ok = linalg::spd_solve_robust(&mut a, r, sp);
             if !ok {
@@ -823,12 +922,12 @@ impl CompletionProblem {
             reg += ridge * sp.iter().map(|x| x * x).sum::<f64>();
             if want_inverse {
                 // `a` now holds the Cholesky factor (or garbage if !ok).
-                let inv = &mut ainv[p * r * r..(p + 1) * r * r];
+                let inv = &mut ainv[(p - lo) * r * r..(p - lo + 1) * r * r];
                 if ok {
                     linalg::chol_inverse(&a, r, inv);
                 }
             }
-            for o in lo..hi {
+            for o in olo..ohi {
                 let f = self.col_frame[o];
                 for k in 0..2 {
                     let row = &u[(2 * f + k) * q..(2 * f + k + 1) * q];
@@ -837,18 +936,12 @@ impl CompletionProblem {
                         pred += row[c] * sp[c];
                     }
                     let d = pred - self.col_w[o][k];
-                    res[2 * o + k] = d;
+                    res[2 * (o - o0) + k] = d;
                     cost += d * d;
                 }
             }
         }
-        PointSolve {
-            s,
-            res,
-            ainv,
-            cost,
-            reg,
-        }
+        (cost, reg)
     }
 
     /// Gradient (half of it: `Jᵀ r`) of the reduced cost with respect to the packed camera
@@ -1088,6 +1181,10 @@ pub fn complete(
         cfg
     };
     let solver = solver_for(cfg);
+    // A costly Wiberg iteration: ALS first (see `als_first_flops`).
+    let als_first = cfg.solver == CompletionSolverKind::Wiberg
+        && problem.wiberg_iteration_flops() > cfg.als_first_flops;
+    let mut best_sweeps = 0;
     let mut reports = Vec::with_capacity(cfg.runs);
     let mut best: Option<(usize, Vec<f64>, f64)> = None;
     for run in 0..cfg.runs {
@@ -1099,12 +1196,29 @@ pub fn complete(
                 problem.random_start(&mut rng)
             }
         };
-        let out = solver.solve(&problem, m0.as_ref(), &t0, run, observer);
+        let (out, sweeps) = if als_first {
+            let a = Als::from_config(cfg).solve(&problem, m0.as_ref(), &t0, run, observer);
+            let sweeps = a.report.iterations;
+            if a.report.status == SolverStatus::Converged {
+                let report = SolverReport {
+                    iterations: 0,
+                    ..a.report
+                };
+                (CompletionRun { report, ..a }, sweeps)
+            } else {
+                let mut w = solver.solve(&problem, a.m.as_ref(), &a.t, run, observer);
+                w.report.initial_cost = a.report.initial_cost;
+                (w, sweeps)
+            }
+        } else {
+            (solver.solve(&problem, m0.as_ref(), &t0, run, observer), 0)
+        };
         let mut report = out.report;
         report.seconds = start.elapsed().as_secs_f64();
         let cost = report.final_cost;
         if best.as_ref().is_none_or(|b| cost < b.2 || !b.2.is_finite()) {
             best = Some((run, problem.pack(out.m.as_ref(), &out.t), cost));
+            best_sweeps = sweeps;
         }
         reports.push(report);
     }
@@ -1129,8 +1243,12 @@ pub fn complete(
         report: best_report,
         runs: reports,
         best_run,
+        als_sweeps_first: best_sweeps,
     })
 }
+
+/// Tracks per parallel block of [`CompletionProblem::solve_points`].
+const POINT_BLOCK: usize = 256;
 
 /// Seed of run `run` (SplitMix-style mixing of the base seed and the run index).
 fn run_seed(seed: u64, run: usize) -> u64 {

@@ -195,3 +195,53 @@ fn both_solvers_and_jacobians_fit_noise_free_scene() {
         assert!(c.rms < 1e-6, "{solver:?} {jacobian:?}: rms {}", c.rms);
     }
 }
+
+#[test]
+fn als_first_reaches_the_wiberg_optimum_and_hands_over_when_it_stalls() {
+    // A noisy scene, so that the optimum has a non-zero cost to agree on.
+    let mut meas = scene(10, 60, 3);
+    let mut rng = StdRng::seed_from_u64(11);
+    for i in 0..meas.w.nrows() {
+        for p in 0..meas.w.ncols() {
+            if meas.is_visible(i / 2, p) {
+                meas.w[(i, p)] += 0.5 * rng.sample::<f64, _>(StandardNormal);
+            }
+        }
+    }
+    let base = CompletionConfig::default();
+    let alone = complete(&meas, &base, &mut crate::NoopObserver).unwrap();
+    assert_eq!(alone.als_sweeps_first, 0, "a small table runs Wiberg alone");
+    assert!(alone.report.iterations > 0);
+    // Forced: ALS first (every table is above 0 operations).
+    let first = CompletionConfig {
+        als_first_flops: 0.0,
+        ..base.clone()
+    };
+    let a = complete(&meas, &first, &mut crate::NoopObserver).unwrap();
+    assert!(a.als_sweeps_first > 0);
+    assert_eq!(a.report.status, SolverStatus::Converged);
+    // ALS stops by the gradient test that stops Wiberg: the same optimum, to a relative
+    // cost well below the noise's share of one parameter (1 / n_obs).
+    let rel = (a.rms - alone.rms).abs() / alone.rms;
+    assert!(rel < 1e-6, "ALS first {} vs Wiberg {}", a.rms, alone.rms);
+    // An ALS run that stalls at once hands over: the Wiberg iterations finish the job.
+    let stall = CompletionConfig {
+        als_first_flops: 0.0,
+        stall_tolerance: 1.0,
+        stall_window: 1,
+        ..base
+    };
+    let s = complete(&meas, &stall, &mut crate::NoopObserver).unwrap();
+    assert!(s.als_sweeps_first >= 1);
+    assert!(
+        s.report.iterations > 0,
+        "Wiberg continued after the stalled ALS"
+    );
+    let rel = (s.rms - alone.rms).abs() / alone.rms;
+    assert!(
+        rel < 1e-6,
+        "stalled ALS + Wiberg {} vs Wiberg {}",
+        s.rms,
+        alone.rms
+    );
+}
