@@ -1183,8 +1183,9 @@ impl Reconstruction {
         // 3. Fit of the selected tracks: affine factorization, metric upgrade, refinement,
         //    and the projective stages for the projective and perspective cameras.
         let mut fitted = fit_selection(&kept, &selection, config, None, &mut timer)?;
-        // 4. The projective model judges the tracks again.
-        if config.camera.is_projective() {
+        // 4. The projective model judges the tracks again (not when the automatic choice's
+        //    pre-test on a subset already kept the scaled orthographic camera).
+        if config.camera.is_projective() && fitted.projective.is_some() {
             fitted = projective_verdict_stage(
                 &kept,
                 &mut selection,
@@ -1607,7 +1608,7 @@ fn camera_stage(
     let meas = &fitted.meas;
     let metric_rms_px = fitted.model.rms(meas);
     let mut projective = fitted.projective.take();
-    let mut pre_selection = None;
+    let mut pre_selection = fitted.pretest.take();
     if config.camera == CameraModel::Auto
         && let Some(pf) = &projective
     {
@@ -1889,6 +1890,9 @@ struct Fitted {
     refinement: Option<RefinementReport>,
     mirrored: bool,
     projective: Option<projective::ProjectiveFit>,
+    /// With the automatic choice on a large table: the projective pre-test on a subset,
+    /// when it kept the scaled orthographic camera (`projective` is then `None`).
+    pretest: Option<ModelSelection>,
     /// σ4/σ3 and what it was computed on.
     rank_ratio: f64,
     rank_source: String,
@@ -2107,7 +2111,53 @@ fn fit_selection(
             }
             Ok(()) => true,
         };
-    let projective = if config.camera.is_projective() && projective_usable {
+    // With the automatic choice on a table whose projective adjustment would be costly,
+    // the pre-test runs on a subset first (see `pretest_subset`); when it keeps the scaled
+    // orthographic camera the projective stages do not run on the whole table.
+    let mut pretest = None;
+    if config.camera == CameraModel::Auto
+        && projective_usable
+        && projective_iteration_flops(&meas) > PRETEST_FLOPS
+        && let Some((frames, tracks)) = pretest_subset(&meas)
+    {
+        let sub = sub_measurements(&meas, &frames, &tracks);
+        let test = timer.run("projective-pretest", |_| part_pretest(&sub, config));
+        match test {
+            Some((delta, threshold, affine_rms, projective_rms)) if delta <= threshold => {
+                pretest = Some(ModelSelection {
+                    chosen: CameraModel::ScaledOrthographic,
+                    affine_rms_px: affine_rms,
+                    perspective_rms_px: None,
+                    perspective_focal_px: None,
+                    noise_sigma_px: f64::NAN,
+                    delta_chi2: delta,
+                    threshold,
+                    reason: format!(
+                        "scaled orthographic (no significant perspective) — on {} frames × {} \
+                         tracks ({} observations) chosen evenly from the {} × {} (the \
+                         projective adjustment of the whole table would cost {:.1e} operations \
+                         per iteration) the projective camera's RMS {projective_rms:.4} px vs \
+                         {affine_rms:.4} px for the affine camera fitted to the same subset: \
+                         Δχ² = {delta:.1} ≤ 2 (3F − 3) = {threshold:.1}; the perspective \
+                         stages were skipped",
+                        sub.n_frames(),
+                        sub.n_points(),
+                        sub.n_observed(),
+                        meas.n_frames(),
+                        meas.n_points(),
+                        projective_iteration_flops(&meas)
+                    ),
+                });
+            }
+            Some(_) => {}
+            None => warnings.push(
+                "camera auto: the projective pre-test on a subset could not be fitted; the \
+                 whole table is fitted"
+                    .into(),
+            ),
+        }
+    }
+    let projective = if config.camera.is_projective() && projective_usable && pretest.is_none() {
         let start = projective::AffineStart {
             m: affine.m_hat.as_ref(),
             s: affine.s_hat.as_ref(),
@@ -2172,10 +2222,197 @@ fn fit_selection(
         refinement,
         mirrored,
         projective,
+        pretest,
         rank_ratio,
         rank_source,
         warnings,
     })
+}
+
+/// Above this estimate of one projective bundle adjustment iteration on the whole table
+/// ([`projective_iteration_flops`]), the automatic camera choice runs its projective
+/// pre-test on a subset ([`pretest_subset`]). About a second per iteration: every real data
+/// set of docs/results.md is below it (the hotel 1.8·10⁸); a complete 300 × 10 000 table
+/// is at 1.2·10¹¹, where the whole-table pre-test took over 11 minutes.
+const PRETEST_FLOPS: f64 = 1e10;
+
+/// Frames and tracks of the pre-test's subset.
+const PRETEST_FRAMES: usize = 150;
+const PRETEST_TRACKS: usize = 400;
+/// Tracks each subset frame sees at least (when the table has them).
+const PRETEST_PER_FRAME: usize = 12;
+
+/// Estimated floating-point operations of one projective bundle adjustment iteration on
+/// `meas`: the reduced camera system's assembly, `Σ_p k_p² 11²` over tracks seen in `k_p`
+/// frames, plus its dense factorisation `(11F)³/3` (a table whose tracks span the sequence
+/// gives a dense system). `O(F N)`.
+fn projective_iteration_flops(meas: &Measurements) -> f64 {
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    let assembly: f64 = (0..np)
+        .map(|p| {
+            let k = (0..nf).filter(|&f| meas.is_visible(f, p)).count() as f64;
+            k * k * 121.0
+        })
+        .sum();
+    assembly + (11.0 * nf as f64).powi(3) / 3.0
+}
+
+/// The subset of the automatic choice's projective pre-test on a large table: at most
+/// [`PRETEST_FRAMES`] frames evenly spaced over the sequence (so the baseline, which decides
+/// how much perspective shows, is the whole sequence's), and at most [`PRETEST_TRACKS`]
+/// tracks seen in at least 3 of them, taken evenly in track order, plus the tracks needed
+/// for every subset frame to see [`PRETEST_PER_FRAME`]. `None` when the subset would not
+/// be smaller than the table. The test on the subset has less power than on the whole
+/// table, and the scaled orthographic model it is compared with was fitted to the whole
+/// table (a bias towards perspective of at most its `6F + 3N` subset parameters in χ²,
+/// against a threshold of `(5F − 8) ln n`). `O(F N)`.
+fn pretest_subset(meas: &Measurements) -> Option<(Vec<usize>, Vec<usize>)> {
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    let frames: Vec<usize> = if nf <= PRETEST_FRAMES {
+        (0..nf).collect()
+    } else {
+        let mut v: Vec<usize> = (0..PRETEST_FRAMES)
+            .map(|i| (i * (nf - 1) + (PRETEST_FRAMES - 1) / 2) / (PRETEST_FRAMES - 1))
+            .collect();
+        v.dedup();
+        v
+    };
+    let seen = |p: usize| frames.iter().filter(|&&f| meas.is_visible(f, p)).count();
+    let candidates: Vec<usize> = (0..np).filter(|&p| seen(p) >= 3).collect();
+    if candidates.len() < 7 {
+        return None;
+    }
+    let step = candidates.len().div_ceil(PRETEST_TRACKS).max(1);
+    let mut chosen = vec![false; np];
+    for &p in candidates.iter().step_by(step) {
+        chosen[p] = true;
+    }
+    for &f in &frames {
+        let mut have = candidates
+            .iter()
+            .filter(|&&p| chosen[p] && meas.is_visible(f, p))
+            .count();
+        for &p in &candidates {
+            if have >= PRETEST_PER_FRAME {
+                break;
+            }
+            if !chosen[p] && meas.is_visible(f, p) {
+                chosen[p] = true;
+                have += 1;
+            }
+        }
+    }
+    let tracks: Vec<usize> = (0..np).filter(|&p| chosen[p]).collect();
+    (frames.len() < nf || tracks.len() < np).then_some((frames, tracks))
+}
+
+/// One projective pre-test on a part of the table (a subset of a large dense table, or a
+/// window of a long sparse one): the affine camera (completion, `8F` parameters per part)
+/// and the projective camera started from it (`11F`) are both fitted to `meas`, so neither
+/// side carries an advantage from being fitted to more data than it is judged on. Returns
+/// `(Δχ², threshold, affine RMS, projective RMS)` with Akaike's threshold for the projective
+/// camera's `3F − 3` extra parameters, `2 (3F − 3)` (gauge: 12 affine, 15 projective): a
+/// part has far fewer observations than the table, and the BIC's `ln n` per parameter
+/// missed the perspective of a 130-frame corridor's 40-frame windows (Δχ² 250–530 against
+/// 880; AIC threshold 234) that the whole-table test finds. `None` when either fit fails.
+fn part_pretest(meas: &Measurements, config: &Config) -> Option<(f64, f64, f64, f64)> {
+    projective::check_observations(meas).ok()?;
+    let c = completion::complete(meas, &config.completion, &mut crate::NoopObserver).ok()?;
+    let start = projective::AffineStart {
+        m: c.m.as_ref(),
+        s: c.s.as_ref(),
+        t: &c.t,
+    };
+    let pf = projective::fit(meas, start, &config.projective, 0, &mut crate::NoopObserver).ok()?;
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    let n = (2 * meas.n_observed()) as f64;
+    let k = (11 * nf + 3 * np).saturating_sub(15);
+    let (delta, _) = delta_chi2(c.rms, pf.rms_px, n, k);
+    // Akaike's 2 per parameter rather than the BIC's ln n: the pre-test only skips work,
+    // so it skips only when even the lenient criterion sees nothing. Without perspective
+    // Δχ² is about χ² with 3F − 3 degrees of freedom (mean 3F − 3): twice the mean is
+    // over 5 standard deviations, √(2(3F − 3)), above it for F ≥ 10.
+    let threshold = 2.0 * (3 * nf).saturating_sub(3).max(1) as f64;
+    (delta.is_finite() && threshold.is_finite()).then_some((delta, threshold, c.rms, pf.rms_px))
+}
+
+/// The automatic choice's projective pre-test on the sparse path: up to three windows of
+/// [`crate::projective::windowed::WindowConfig::window`] frames (the first, the middle and
+/// the last) are each fitted by the affine completion and the projective camera on their
+/// tracks seen in at least 3 of their frames ([`part_pretest`]); their `Δχ²` and
+/// thresholds are summed. Returns the scaled orthographic
+/// choice when the windows together show no significant perspective — the perspective
+/// stages (every window of the sequence fitted, chained and adjusted) are then skipped —
+/// and `None` when they do, or when a window cannot be fitted (the perspective stages then
+/// decide, as before). Cost: three small dense fits, independent of the length.
+fn sparse_pretest(kept: &TrackTable, inl: &[usize], config: &Config) -> Option<ModelSelection> {
+    let nf = kept.n_frames();
+    let w = config.sparse.window.window.clamp(2, nf.max(2)).min(nf);
+    let count = if nf >= 3 * w { 3 } else { (nf / w).max(1) };
+    let mut starts: Vec<usize> = (0..count)
+        .map(|i| {
+            if count == 1 {
+                0
+            } else {
+                i * (nf - w) / (count - 1)
+            }
+        })
+        .collect();
+    starts.dedup();
+    let (mut delta, mut threshold, mut n_obs) = (0.0, 0.0, 0usize);
+    let (mut ss_a, mut ss_p, mut n_scalars) = (0.0, 0.0, 0.0);
+    for &a in &starts {
+        let frames: Vec<usize> = (a..a + w).collect();
+        let meas0 = kept.select(&frames, inl).measurements();
+        let local: Vec<usize> = (0..inl.len())
+            .filter(|&j| (0..w).filter(|&i| meas0.is_visible(i, j)).count() >= 3)
+            .collect();
+        let all_rows: Vec<usize> = (0..w).collect();
+        let meas = sub_measurements(&meas0, &all_rows, &local);
+        drop(meas0);
+        let (d, t, affine_rms, projective_rms) = part_pretest(&meas, config)?;
+        delta += d;
+        threshold += t;
+        n_obs += meas.n_observed();
+        let n = (2 * meas.n_observed()) as f64;
+        ss_a += affine_rms * affine_rms * n;
+        ss_p += projective_rms * projective_rms * n;
+        n_scalars += n;
+    }
+    if delta > threshold {
+        return None;
+    }
+    let (affine_rms, projective_rms) = ((ss_a / n_scalars).sqrt(), (ss_p / n_scalars).sqrt());
+    Some(ModelSelection {
+        chosen: CameraModel::ScaledOrthographic,
+        affine_rms_px: affine_rms,
+        perspective_rms_px: None,
+        perspective_focal_px: None,
+        noise_sigma_px: f64::NAN,
+        delta_chi2: delta,
+        threshold,
+        reason: format!(
+            "scaled orthographic (no significant perspective) — on {} window(s) of {w} frames \
+             ({n_obs} observations) the projective camera's RMS {projective_rms:.4} px vs \
+             {affine_rms:.4} px for the affine camera fitted to the same windows: Δχ² = \
+             {delta:.1} ≤ Σ 2 (3F − 3) = {threshold:.1}; the perspective stages were \
+             skipped",
+            starts.len()
+        ),
+    })
+}
+
+/// The measurements of `frames` × `tracks`. `O(|frames| |tracks|)`.
+fn sub_measurements(meas: &Measurements, frames: &[usize], tracks: &[usize]) -> Measurements {
+    let n = tracks.len();
+    let w = Mat::from_fn(2 * frames.len(), n, |i, j| {
+        meas.w[(2 * frames[i / 2] + i % 2, tracks[j])]
+    });
+    let visible = frames
+        .iter()
+        .flat_map(|&f| tracks.iter().map(move |&p| meas.is_visible(f, p)))
+        .collect();
+    Measurements::new(w, visible)
 }
 
 /// σ4/σ3 of the largest complete block of a partial table: a window of consecutive (fit)
@@ -2893,7 +3130,15 @@ fn sparse_reconstruction(
     let mut camera_model = affine_camera;
     let mut model_selection = None;
     let mut perspective = None;
-    if config.camera.is_perspective() {
+    let pretest = if config.camera == CameraModel::Auto {
+        timer.run("projective-pretest", |_| sparse_pretest(kept, &inl, config))
+    } else {
+        None
+    };
+    if let Some(sel) = pretest {
+        camera_model = sel.chosen;
+        model_selection = Some(sel);
+    } else if config.camera.is_perspective() {
         let obs = observations_of(kept, &inl);
         let n_obs = obs.len();
         let per = timer.run("perspective", |o| {
@@ -3110,4 +3355,50 @@ fn sparse_reconstruction(
         input_frame_ids: table.frame_ids().to_vec(),
         input_track_ids: table.track_ids().to_vec(),
     })
+}
+
+#[cfg(test)]
+mod pretest_tests {
+    use super::*;
+
+    /// A 400-frame table of tracks seen in windows of 30–200 frames.
+    fn windows(nf: usize, np: usize) -> Measurements {
+        let visible: Vec<bool> = (0..nf * np)
+            .map(|k| {
+                let (f, p) = (k / np, k % np);
+                let start = (p * 37) % nf;
+                let len = 30 + (p * 13) % 170;
+                f >= start && f < start + len
+            })
+            .collect();
+        let w = Mat::from_fn(2 * nf, np, |i, p| (i * 7 + p * 3) as f64);
+        Measurements::new(w, visible)
+    }
+
+    #[test]
+    fn the_pretest_subset_spans_the_sequence_and_covers_every_frame() {
+        let meas = windows(400, 3000);
+        let (frames, tracks) = pretest_subset(&meas).expect("a subset");
+        assert_eq!(frames.len(), PRETEST_FRAMES);
+        assert_eq!((frames[0], *frames.last().unwrap()), (0, 399));
+        assert!(frames.windows(2).all(|w| w[1] > w[0] && w[1] - w[0] <= 3));
+        assert!(tracks.len() >= PRETEST_TRACKS / 2 && tracks.len() < 3000);
+        let sub = sub_measurements(&meas, &frames, &tracks);
+        for (i, &f) in frames.iter().enumerate() {
+            let seen = (0..tracks.len()).filter(|&j| sub.is_visible(i, j)).count();
+            let available = (0..3000).filter(|&p| meas.is_visible(f, p)).count();
+            assert!(
+                seen >= PRETEST_PER_FRAME.min(available),
+                "frame {f}: {seen} tracks"
+            );
+            // The subset's entries are the table's.
+            for (j, &p) in tracks.iter().enumerate() {
+                assert_eq!(sub.is_visible(i, j), meas.is_visible(f, p));
+                assert_eq!(sub.w[(2 * i + 1, j)], meas.w[(2 * f + 1, p)]);
+            }
+        }
+        // Only big tables are tested on a subset.
+        assert!(projective_iteration_flops(&meas) > PRETEST_FLOPS);
+        assert!(projective_iteration_flops(&windows(50, 300)) < PRETEST_FLOPS);
+    }
 }
