@@ -606,6 +606,143 @@ fn solve_point<M: BundleModel>(
 
 /// `out = J B` (m × d) or a copy of `J` when the basis is the identity.
 #[inline]
+/// Frame ranges `[a, b)` covering `0..nf`, at most `parts` of them, with about equal
+/// numbers of reduced-system entries in their columns (the Schur update's work follows
+/// them).
+fn frame_ranges(pattern: &Pattern, nf: usize, cd: usize, parts: usize) -> Vec<(usize, usize)> {
+    let parts = parts.clamp(1, nf.max(1));
+    let total = pattern.col_ptr[nf * cd].max(1);
+    let mut ranges = Vec::with_capacity(parts);
+    let mut a = 0;
+    for t in 1..=parts {
+        let target = total * t / parts;
+        let mut b = a;
+        while b < nf && (t == parts || pattern.col_ptr[(b + 1) * cd] <= target || b == a) {
+            b += 1;
+        }
+        if b > a {
+            ranges.push((a, b));
+        }
+        a = b;
+    }
+    if let Some(last) = ranges.last_mut() {
+        last.1 = nf;
+    } else {
+        ranges.push((0, nf));
+    }
+    ranges
+}
+
+/// The Schur complement's share of the cameras `a..b`: for every track seen in one of
+/// them, `S_{fi,fj} −= W_{fi} V⁻¹ W_{fj}ᵀ` for the pairs with `fj` in `a..b` (lower
+/// triangle, `fi ≥ fj`), the shared-parameter coupling `S_{g,fj} −= Y_g W_{fj}ᵀ`, and
+/// `rhs_f += W_f V⁻¹ g_p` for `f` in `a..b`. `vals` holds the CSC values from `offset` on
+/// (the columns of the range), `rhs` the range's right-hand side. `O(Σ_p k_p² c² d)` over
+/// the range's tracks.
+#[allow(clippy::too_many_arguments)]
+fn schur_columns(
+    g: &Graph,
+    pattern: &Pattern,
+    (a, b): (usize, usize),
+    (cd, pd, k): (usize, usize, usize),
+    (lin, stride): (&[f64], usize),
+    lins: &[TrackLin],
+    vinv: &[Vec<f64>],
+    vals: &mut [f64],
+    offset: usize,
+    rhs: &mut [f64],
+) {
+    let mut y = vec![0.0; cd * pd];
+    let mut ys: Vec<f64> = Vec::new();
+    let mut yg = vec![0.0; k * pd];
+    for p in 0..g.n_pts {
+        let range = g.track(p);
+        if range.is_empty() {
+            continue;
+        }
+        // Frames increase along a track.
+        let (first, last) = (g.cam[range.start], g.cam[range.end - 1]);
+        if last < a || first >= b {
+            continue;
+        }
+        let vi = &vinv[p];
+        let gp = &lins[p].gp;
+        ys.resize(range.len() * cd * pd, 0.0);
+        for (i, o) in range.clone().enumerate() {
+            let wb = &lin[o * stride..o * stride + cd * pd];
+            for c1 in 0..cd {
+                for d2 in 0..pd {
+                    let mut s = 0.0;
+                    for d1 in 0..pd {
+                        s += wb[c1 * pd + d1] * vi[d1 * pd + d2];
+                    }
+                    y[c1 * pd + d2] = s;
+                }
+            }
+            ys[i * cd * pd..(i + 1) * cd * pd].copy_from_slice(&y);
+            let f = g.cam[o];
+            if (a..b).contains(&f) {
+                for c1 in 0..cd {
+                    let s: f64 = (0..pd).map(|d| y[c1 * pd + d] * gp[d]).sum();
+                    rhs[(f - a) * cd + c1] += s;
+                }
+            }
+        }
+        if k > 0 {
+            let wg = &lins[p].wg;
+            for k1 in 0..k {
+                for d2 in 0..pd {
+                    yg[k1 * pd + d2] = (0..pd).map(|d1| wg[k1 * pd + d1] * vi[d1 * pd + d2]).sum();
+                }
+            }
+            for o in range.clone() {
+                let f = g.cam[o];
+                if !(a..b).contains(&f) {
+                    continue;
+                }
+                let wb = &lin[o * stride..o * stride + cd * pd];
+                for c1 in 0..cd {
+                    for k1 in 0..k {
+                        let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * wb[c1 * pd + d]).sum();
+                        vals[pattern.glob_in_cam(f, c1, k1) - offset] -= s;
+                    }
+                }
+            }
+        }
+        let obs: Vec<usize> = range.collect();
+        for (i, &oi) in obs.iter().enumerate() {
+            let fi = g.cam[oi];
+            if fi < a {
+                continue;
+            }
+            let yi = &ys[i * cd * pd..(i + 1) * cd * pd];
+            for &oj in &obs[..=i] {
+                let fj = g.cam[oj];
+                if fj < a {
+                    continue;
+                }
+                if fj >= b {
+                    break;
+                }
+                // Column c2 of block (fi, fj) is contiguous in the CSC values.
+                let wj = &lin[oj * stride..oj * stride + cd * pd];
+                for c2 in 0..cd {
+                    let (base, r0) = pattern.column(fi, fj, c2);
+                    let w2 = &wj[c2 * pd..(c2 + 1) * pd];
+                    for c1 in r0..cd {
+                        let y1 = &yi[c1 * pd..(c1 + 1) * pd];
+                        let mut s = 0.0;
+                        for d in 0..pd {
+                            s += y1[d] * w2[d];
+                        }
+                        vals[base + c1 - offset] -= s;
+                    }
+                }
+            }
+        }
+    }
+}
+
 fn tangent(
     j: &[f64],
     basis: &[f64],
@@ -1289,17 +1426,57 @@ pub fn minimize_shared<M: BundleModel>(
                     rhs[(f * cd + c1, 0)] = 0.0;
                 }
             }
-            let mut y = vec![0.0; cd * pd];
-            let mut ys: Vec<f64> = Vec::new();
-            let mut yg = vec![0.0; k * pd];
-            for p in 0..np {
-                let range = g.track(p);
-                ys.resize(range.len() * cd * pd, 0.0);
-                let vi = &vinv[p];
-                let gp = &lins[p].gp;
-                if k > 0 {
-                    // Shared rows: Y_g = W_g V⁻¹; S_gg −= Y_g W_gᵀ, S_gf −= Y_g W_fᵀ.
-                    let wg = &lins[p].wg;
+            // S −= W V⁻¹ Wᵀ and rhs += W V⁻¹ g_p, track by track. The columns of frames
+            // a..b are one contiguous run of the CSC values, so the frames are split into
+            // ranges, one per thread, each thread adding every track's share to its own
+            // columns (and to its frames' right-hand sides) in track order: the sums are
+            // those of the sequential loop, whatever the number of threads.
+            let cam_end = pattern.col_ptr[nf * cd];
+            let (cam_values, glob_values) = values.split_at_mut(cam_end);
+            let ranges = frame_ranges(&pattern, nf, cd, rayon::current_num_threads());
+            let mut value_parts: Vec<&mut [f64]> = Vec::with_capacity(ranges.len());
+            {
+                let mut rest: &mut [f64] = cam_values;
+                let mut at = 0;
+                for &(_, b) in &ranges {
+                    let end = pattern.col_ptr[b * cd];
+                    let (head, tail) = rest.split_at_mut(end - at);
+                    value_parts.push(head);
+                    rest = tail;
+                    at = end;
+                }
+            }
+            let rhs_parts: Vec<Vec<f64>> = ranges
+                .par_iter()
+                .zip(value_parts.into_par_iter())
+                .map(|(&(a, b), vals)| {
+                    let offset = pattern.col_ptr[a * cd];
+                    let mut rhs_part = vec![0.0; (b - a) * cd];
+                    schur_columns(
+                        g,
+                        &pattern,
+                        (a, b),
+                        (cd, pd, k),
+                        (&lin, stride),
+                        &lins,
+                        &vinv,
+                        vals,
+                        offset,
+                        &mut rhs_part,
+                    );
+                    rhs_part
+                })
+                .collect();
+            for (&(a, _), part) in ranges.iter().zip(&rhs_parts) {
+                for (i, v) in part.iter().enumerate() {
+                    rhs[(a * cd + i, 0)] += v;
+                }
+            }
+            if k > 0 {
+                // The shared rows' own block: S_gg −= Y_g W_gᵀ, rhs_g += Y_g g_p.
+                let mut yg = vec![0.0; k * pd];
+                for p in 0..np {
+                    let (vi, gp, wg) = (&vinv[p], &lins[p].gp, &lins[p].wg);
                     for k1 in 0..k {
                         for d2 in 0..pd {
                             yg[k1 * pd + d2] =
@@ -1309,59 +1486,7 @@ pub fn minimize_shared<M: BundleModel>(
                         rhs[(nf * cd + k1, 0)] += s;
                         for k2 in 0..=k1 {
                             let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * wg[k2 * pd + d]).sum();
-                            values[pattern.glob(nf, k1, k2)] -= s;
-                        }
-                    }
-                    for o in range.clone() {
-                        let f = g.cam[o];
-                        let wb = &lin[o * stride..o * stride + cd * pd];
-                        for c1 in 0..cd {
-                            for k1 in 0..k {
-                                let s: f64 =
-                                    (0..pd).map(|d| yg[k1 * pd + d] * wb[c1 * pd + d]).sum();
-                                values[pattern.glob_in_cam(f, c1, k1)] -= s;
-                            }
-                        }
-                    }
-                }
-                for (i, o) in range.clone().enumerate() {
-                    let wb = &lin[o * stride..o * stride + cd * pd];
-                    for c1 in 0..cd {
-                        for d2 in 0..pd {
-                            let mut s = 0.0;
-                            for d1 in 0..pd {
-                                s += wb[c1 * pd + d1] * vi[d1 * pd + d2];
-                            }
-                            y[c1 * pd + d2] = s;
-                        }
-                    }
-                    ys[i * cd * pd..(i + 1) * cd * pd].copy_from_slice(&y);
-                    let f = g.cam[o];
-                    for c1 in 0..cd {
-                        let s: f64 = (0..pd).map(|d| y[c1 * pd + d] * gp[d]).sum();
-                        rhs[(f * cd + c1, 0)] += s;
-                    }
-                }
-                let obs: Vec<usize> = range.collect();
-                for (i, &oi) in obs.iter().enumerate() {
-                    let fi = g.cam[oi];
-                    let yi = &ys[i * cd * pd..(i + 1) * cd * pd];
-                    for &oj in &obs[..=i] {
-                        let fj = g.cam[oj];
-                        // Frames increase along a track, so fi ≥ fj. Column c2 of
-                        // block (fi, fj) is contiguous in the CSC values.
-                        let wj = &lin[oj * stride..oj * stride + cd * pd];
-                        for c2 in 0..cd {
-                            let (base, r0) = pattern.column(fi, fj, c2);
-                            let w2 = &wj[c2 * pd..(c2 + 1) * pd];
-                            for c1 in r0..cd {
-                                let y1 = &yi[c1 * pd..(c1 + 1) * pd];
-                                let mut s = 0.0;
-                                for d in 0..pd {
-                                    s += y1[d] * w2[d];
-                                }
-                                values[base + c1] -= s;
-                            }
+                            glob_values[pattern.glob(nf, k1, k2) - cam_end] -= s;
                         }
                     }
                 }
