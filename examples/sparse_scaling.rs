@@ -32,8 +32,9 @@ fn accuracy(r: &Reconstruction, truth: &rank3::MetricModel) -> f64 {
     eval::structure_error(&r.model.points, &tru)
 }
 
-/// With `VERBOSE` set, prints every solver iteration and stage to stderr.
-struct Printer;
+/// With `VERBOSE` set, prints every solver iteration and stage to stderr, each with the
+/// seconds since the reconstruction started.
+struct Printer(Instant);
 
 impl rank3::Observer for Printer {
     fn on_event(&mut self, e: &rank3::Event<'_>) {
@@ -48,10 +49,14 @@ impl rank3::Observer for Printer {
                 rms,
                 lambda,
                 ..
-            } => eprintln!("{solver}[{run}] {iteration} rms {rms:.10} lambda {lambda:.3e}"),
-            rank3::Event::StageFinished { stage, seconds } => {
-                eprintln!("stage {stage}: {seconds:.2} s")
-            }
+            } => eprintln!(
+                "{:8.2} s {solver}[{run}] {iteration} rms {rms:.10} lambda {lambda:.3e}",
+                self.0.elapsed().as_secs_f64()
+            ),
+            rank3::Event::StageFinished { stage, seconds } => eprintln!(
+                "{:8.2} s stage {stage}: {seconds:.2} s",
+                self.0.elapsed().as_secs_f64()
+            ),
             _ => {}
         }
     }
@@ -74,7 +79,7 @@ fn child(frames: usize, per_frame: usize, sparse: bool, compare: bool) {
         config.sparse.pipeline = Pipeline::Sparse;
     }
     let t1 = Instant::now();
-    let r = Reconstruction::from_tracks_observed(&table, &config, &mut Printer)
+    let r = Reconstruction::from_tracks_observed(&table, &config, &mut Printer(Instant::now()))
         .expect("reconstruction");
     let run_s = t1.elapsed().as_secs_f64();
     let structure = accuracy(&r, &truth);
