@@ -871,6 +871,30 @@ fn delta_chi2(affine_rms: f64, richer_rms: f64, n: f64, k: usize) -> (f64, f64) 
 }
 
 impl ModelSelection {
+    /// The scaled orthographic camera kept by a pre-test on parts of the table
+    /// ([`part_pretest`]): `(Δχ², threshold, affine RMS, projective RMS)` over the parts,
+    /// which `parts` describes.
+    fn affine_by_parts(
+        (delta, threshold, affine_rms, projective_rms): (f64, f64, f64, f64),
+        parts: &str,
+    ) -> Self {
+        Self {
+            chosen: CameraModel::ScaledOrthographic,
+            affine_rms_px: affine_rms,
+            perspective_rms_px: None,
+            perspective_focal_px: None,
+            noise_sigma_px: f64::NAN,
+            delta_chi2: delta,
+            threshold,
+            reason: format!(
+                "scaled orthographic (no significant perspective) — on {parts} the projective \
+                 camera's RMS {projective_rms:.4} px vs {affine_rms:.4} px for the affine camera \
+                 fitted to the same observations: Δχ² = {delta:.1} ≤ Σ 2 (3F − 3) = \
+                 {threshold:.1}; the perspective stages were skipped"
+            ),
+        }
+    }
+
     /// The projective pre-test (see the type's documentation); `chosen` is perspective
     /// when the test passes (the perspective stages then decide).
     fn pretest(
@@ -2124,22 +2148,12 @@ fn fit_selection(
         let test = timer.run("projective-pretest", |_| part_pretest(&sub, config));
         match test {
             Some((delta, threshold, affine_rms, projective_rms)) if delta <= threshold => {
-                pretest = Some(ModelSelection {
-                    chosen: CameraModel::ScaledOrthographic,
-                    affine_rms_px: affine_rms,
-                    perspective_rms_px: None,
-                    perspective_focal_px: None,
-                    noise_sigma_px: f64::NAN,
-                    delta_chi2: delta,
-                    threshold,
-                    reason: format!(
-                        "scaled orthographic (no significant perspective) — on {} frames × {} \
-                         tracks ({} observations) chosen evenly from the {} × {} (the \
-                         projective adjustment of the whole table would cost {:.1e} operations \
-                         per iteration) the projective camera's RMS {projective_rms:.4} px vs \
-                         {affine_rms:.4} px for the affine camera fitted to the same subset: \
-                         Δχ² = {delta:.1} ≤ 2 (3F − 3) = {threshold:.1}; the perspective \
-                         stages were skipped",
+                pretest = Some(ModelSelection::affine_by_parts(
+                    (delta, threshold, affine_rms, projective_rms),
+                    &format!(
+                        "{} frames × {} tracks ({} observations) chosen evenly from the {} × {} \
+                         (the projective adjustment of the whole table would cost {:.1e} \
+                         operations per iteration)",
                         sub.n_frames(),
                         sub.n_points(),
                         sub.n_observed(),
@@ -2147,7 +2161,7 @@ fn fit_selection(
                         meas.n_points(),
                         projective_iteration_flops(&meas)
                     ),
-                });
+                ));
             }
             Some(_) => {}
             None => warnings.push(
@@ -2383,23 +2397,13 @@ fn sparse_pretest(kept: &TrackTable, inl: &[usize], config: &Config) -> Option<M
         return None;
     }
     let (affine_rms, projective_rms) = ((ss_a / n_scalars).sqrt(), (ss_p / n_scalars).sqrt());
-    Some(ModelSelection {
-        chosen: CameraModel::ScaledOrthographic,
-        affine_rms_px: affine_rms,
-        perspective_rms_px: None,
-        perspective_focal_px: None,
-        noise_sigma_px: f64::NAN,
-        delta_chi2: delta,
-        threshold,
-        reason: format!(
-            "scaled orthographic (no significant perspective) — on {} window(s) of {w} frames \
-             ({n_obs} observations) the projective camera's RMS {projective_rms:.4} px vs \
-             {affine_rms:.4} px for the affine camera fitted to the same windows: Δχ² = \
-             {delta:.1} ≤ Σ 2 (3F − 3) = {threshold:.1}; the perspective stages were \
-             skipped",
+    Some(ModelSelection::affine_by_parts(
+        (delta, threshold, affine_rms, projective_rms),
+        &format!(
+            "{} window(s) of {w} frames ({n_obs} observations)",
             starts.len()
         ),
-    })
+    ))
 }
 
 /// The measurements of `frames` × `tracks`. `O(|frames| |tracks|)`.
