@@ -705,7 +705,6 @@ impl CompletionProblem {
     pub fn n_observed(&self) -> usize {
         self.col_frame.len()
     }
-    /// Camera parameters per matrix row: `r + 1` (affine) or `r`.
     /// Estimated floating-point operations of one Wiberg iteration: the reduced camera
     /// system's assembly, `Σ_p (2 k_p q)² r` over tracks seen in `k_p` frames, plus its
     /// dense Cholesky factorisation, `(2Fq)³/3`. `O(N)`.
@@ -722,6 +721,7 @@ impl CompletionProblem {
         assembly + (2.0 * self.n_frames as f64 * q).powi(3) / 3.0
     }
 
+    /// Camera parameters per matrix row: `r + 1` (affine) or `r`.
     pub(crate) fn q(&self) -> usize {
         self.rank + usize::from(self.affine)
     }

@@ -604,8 +604,6 @@ fn solve_point<M: BundleModel>(
     cost
 }
 
-/// `out = J B` (m × d) or a copy of `J` when the basis is the identity.
-#[inline]
 /// Frame ranges `[a, b)` covering `0..nf`, at most `parts` of them, with about equal
 /// numbers of reduced-system entries in their columns (the Schur update's work follows
 /// them).
@@ -637,8 +635,8 @@ fn frame_ranges(pattern: &Pattern, nf: usize, cd: usize, parts: usize) -> Vec<(u
 /// them, `S_{fi,fj} −= W_{fi} V⁻¹ W_{fj}ᵀ` for the pairs with `fj` in `a..b` (lower
 /// triangle, `fi ≥ fj`), the shared-parameter coupling `S_{g,fj} −= Y_g W_{fj}ᵀ`, and
 /// `rhs_f += W_f V⁻¹ g_p` for `f` in `a..b`. `vals` holds the CSC values from `offset` on
-/// (the columns of the range), `rhs` the range's right-hand side. `O(Σ_p k_p² c² d)` over
-/// the range's tracks.
+/// (the columns of the range), `rhs` the range's right-hand side; `ygs` holds `Y_g = W_g V⁻¹`
+/// per track (empty without shared parameters). `O(Σ_p k_p² c² d)` over the range's tracks.
 #[allow(clippy::too_many_arguments)]
 fn schur_columns(
     g: &Graph,
@@ -648,13 +646,13 @@ fn schur_columns(
     (lin, stride): (&[f64], usize),
     lins: &[TrackLin],
     vinv: &[Vec<f64>],
+    ygs: &[f64],
     vals: &mut [f64],
     offset: usize,
     rhs: &mut [f64],
 ) {
     let mut y = vec![0.0; cd * pd];
     let mut ys: Vec<f64> = Vec::new();
-    let mut yg = vec![0.0; k * pd];
     for p in 0..g.n_pts {
         let range = g.track(p);
         if range.is_empty() {
@@ -689,12 +687,7 @@ fn schur_columns(
             }
         }
         if k > 0 {
-            let wg = &lins[p].wg;
-            for k1 in 0..k {
-                for d2 in 0..pd {
-                    yg[k1 * pd + d2] = (0..pd).map(|d1| wg[k1 * pd + d1] * vi[d1 * pd + d2]).sum();
-                }
-            }
+            let yg = &ygs[p * k * pd..(p + 1) * k * pd];
             for o in range.clone() {
                 let f = g.cam[o];
                 if !(a..b).contains(&f) {
@@ -743,6 +736,8 @@ fn schur_columns(
     }
 }
 
+/// `out = J B` (m × d) or a copy of `J` when the basis is the identity.
+#[inline]
 fn tangent(
     j: &[f64],
     basis: &[f64],
@@ -1431,6 +1426,20 @@ pub fn minimize_shared<M: BundleModel>(
             // ranges, one per thread, each thread adding every track's share to its own
             // columns (and to its frames' right-hand sides) in track order: the sums are
             // those of the sequential loop, whatever the number of threads.
+            // Y_g = W_g V⁻¹ per track (models with shared parameters only): the shared
+            // rows' own block and every range's coupling to them use it.
+            let mut ygs = vec![0.0; np * k * pd];
+            if k > 0 {
+                ygs.par_chunks_mut(k * pd).enumerate().for_each(|(p, yg)| {
+                    let (vi, wg) = (&vinv[p], &lins[p].wg);
+                    for k1 in 0..k {
+                        for d2 in 0..pd {
+                            yg[k1 * pd + d2] =
+                                (0..pd).map(|d1| wg[k1 * pd + d1] * vi[d1 * pd + d2]).sum();
+                        }
+                    }
+                });
+            }
             let cam_end = pattern.col_ptr[nf * cd];
             let (cam_values, glob_values) = values.split_at_mut(cam_end);
             let ranges = frame_ranges(&pattern, nf, cd, rayon::current_num_threads());
@@ -1460,6 +1469,7 @@ pub fn minimize_shared<M: BundleModel>(
                         (&lin, stride),
                         &lins,
                         &vinv,
+                        &ygs,
                         vals,
                         offset,
                         &mut rhs_part,
@@ -1474,14 +1484,10 @@ pub fn minimize_shared<M: BundleModel>(
             }
             if k > 0 {
                 // The shared rows' own block: S_gg −= Y_g W_gᵀ, rhs_g += Y_g g_p.
-                let mut yg = vec![0.0; k * pd];
                 for p in 0..np {
-                    let (vi, gp, wg) = (&vinv[p], &lins[p].gp, &lins[p].wg);
+                    let (gp, wg) = (&lins[p].gp, &lins[p].wg);
+                    let yg = &ygs[p * k * pd..(p + 1) * k * pd];
                     for k1 in 0..k {
-                        for d2 in 0..pd {
-                            yg[k1 * pd + d2] =
-                                (0..pd).map(|d1| wg[k1 * pd + d1] * vi[d1 * pd + d2]).sum();
-                        }
                         let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * gp[d]).sum();
                         rhs[(nf * cd + k1, 0)] += s;
                         for k2 in 0..=k1 {
