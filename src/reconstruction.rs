@@ -2139,12 +2139,15 @@ fn fit_selection(
     // the pre-test runs on a subset first (see `pretest_subset`); when it keeps the scaled
     // orthographic camera the projective stages do not run on the whole table.
     let mut pretest = None;
-    if config.camera == CameraModel::Auto
-        && projective_usable
-        && projective_iteration_flops(&meas) > PRETEST_FLOPS
+    let whole_flops = if config.camera == CameraModel::Auto && projective_usable {
+        projective_iteration_flops(&meas)
+    } else {
+        0.0
+    };
+    if whole_flops > PRETEST_FLOPS
         && let Some((frames, tracks)) = pretest_subset(&meas)
     {
-        let sub = sub_measurements(&meas, &frames, &tracks);
+        let sub = fit.select(&frames, &tracks).measurements();
         let test = timer.run("projective-pretest", |_| part_pretest(&sub, config));
         match test {
             Some((delta, threshold, affine_rms, projective_rms)) if delta <= threshold => {
@@ -2159,7 +2162,7 @@ fn fit_selection(
                         sub.n_observed(),
                         meas.n_frames(),
                         meas.n_points(),
-                        projective_iteration_flops(&meas)
+                        whole_flops
                     ),
                 ));
             }
@@ -2276,10 +2279,8 @@ fn projective_iteration_flops(meas: &Measurements) -> f64 {
 /// how much perspective shows, is the whole sequence's), and at most [`PRETEST_TRACKS`]
 /// tracks seen in at least 3 of them, taken evenly in track order, plus the tracks needed
 /// for every subset frame to see [`PRETEST_PER_FRAME`]. `None` when the subset would not
-/// be smaller than the table. The test on the subset has less power than on the whole
-/// table, and the scaled orthographic model it is compared with was fitted to the whole
-/// table (a bias towards perspective of at most its `6F + 3N` subset parameters in χ²,
-/// against a threshold of `(5F − 8) ln n`). `O(F N)`.
+/// be smaller than the table. The test on the subset ([`part_pretest`]) has less power than
+/// on the whole table. `O(F N)`.
 fn pretest_subset(meas: &Measurements) -> Option<(Vec<usize>, Vec<usize>)> {
     let (nf, np) = (meas.n_frames(), meas.n_points());
     let frames: Vec<usize> = if nf <= PRETEST_FRAMES {
@@ -2361,7 +2362,7 @@ fn part_pretest(meas: &Measurements, config: &Config) -> Option<(f64, f64, f64, 
 /// decide, as before). Cost: three small dense fits, independent of the length.
 fn sparse_pretest(kept: &TrackTable, inl: &[usize], config: &Config) -> Option<ModelSelection> {
     let nf = kept.n_frames();
-    let w = config.sparse.window.window.clamp(2, nf.max(2)).min(nf);
+    let w = config.sparse.window.window.max(2).min(nf);
     let count = if nf >= 3 * w { 3 } else { (nf / w).max(1) };
     let mut starts: Vec<usize> = (0..count)
         .map(|i| {
@@ -2377,13 +2378,13 @@ fn sparse_pretest(kept: &TrackTable, inl: &[usize], config: &Config) -> Option<M
     let (mut ss_a, mut ss_p, mut n_scalars) = (0.0, 0.0, 0.0);
     for &a in &starts {
         let frames: Vec<usize> = (a..a + w).collect();
-        let meas0 = kept.select(&frames, inl).measurements();
+        let window = kept.select(&frames, inl);
+        let (ptr, _) = window.by_track();
         let local: Vec<usize> = (0..inl.len())
-            .filter(|&j| (0..w).filter(|&i| meas0.is_visible(i, j)).count() >= 3)
+            .filter(|&j| ptr[j + 1] - ptr[j] >= 3)
             .collect();
         let all_rows: Vec<usize> = (0..w).collect();
-        let meas = sub_measurements(&meas0, &all_rows, &local);
-        drop(meas0);
+        let meas = window.select(&all_rows, &local).measurements();
         let (d, t, affine_rms, projective_rms) = part_pretest(&meas, config)?;
         delta += d;
         threshold += t;
@@ -2404,19 +2405,6 @@ fn sparse_pretest(kept: &TrackTable, inl: &[usize], config: &Config) -> Option<M
             starts.len()
         ),
     ))
-}
-
-/// The measurements of `frames` × `tracks`. `O(|frames| |tracks|)`.
-fn sub_measurements(meas: &Measurements, frames: &[usize], tracks: &[usize]) -> Measurements {
-    let n = tracks.len();
-    let w = Mat::from_fn(2 * frames.len(), n, |i, j| {
-        meas.w[(2 * frames[i / 2] + i % 2, tracks[j])]
-    });
-    let visible = frames
-        .iter()
-        .flat_map(|&f| tracks.iter().map(move |&p| meas.is_visible(f, p)))
-        .collect();
-    Measurements::new(w, visible)
 }
 
 /// σ4/σ3 of the largest complete block of a partial table: a window of consecutive (fit)
@@ -3387,7 +3375,9 @@ mod pretest_tests {
         assert_eq!((frames[0], *frames.last().unwrap()), (0, 399));
         assert!(frames.windows(2).all(|w| w[1] > w[0] && w[1] - w[0] <= 3));
         assert!(tracks.len() >= PRETEST_TRACKS / 2 && tracks.len() < 3000);
-        let sub = sub_measurements(&meas, &frames, &tracks);
+        let sub = TrackTable::from_measurements(&meas)
+            .select(&frames, &tracks)
+            .measurements();
         for (i, &f) in frames.iter().enumerate() {
             let seen = (0..tracks.len()).filter(|&j| sub.is_visible(i, j)).count();
             let available = (0..3000).filter(|&p| meas.is_visible(f, p)).count();
