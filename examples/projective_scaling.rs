@@ -49,15 +49,19 @@ impl rank3::Observer for Printer {
         if std::env::var_os("VERBOSE").is_none() {
             return;
         }
-        if let rank3::Event::Iteration {
-            solver,
-            iteration,
-            rms,
-            lambda,
-            ..
-        } = e
-        {
-            eprintln!("{solver} {iteration} rms {rms:.9} lambda {lambda:.3e}");
+        match e {
+            rank3::Event::Iteration {
+                solver,
+                iteration,
+                rms,
+                lambda,
+                ..
+            } => eprintln!("{solver} {iteration} rms {rms:.9} lambda {lambda:.3e}"),
+            rank3::Event::Warning { message } => eprintln!("warning: {message}"),
+            rank3::Event::StageFinished { stage, seconds } => {
+                eprintln!("stage {stage} {seconds:.1} s")
+            }
+            _ => {}
         }
     }
 }
@@ -68,7 +72,9 @@ impl rank3::Observer for Printer {
 /// `JOINT=1` in the environment uses the joint (damped points, no re-solve) bundle
 /// adjustment instead of variable projection, `DIRECT=1` skips pOSE, `GEO=α` sets the
 /// geodesic acceleration, `NOISE_TOL=τ` the noise-level stop (0: off), `REL_TOL=τ` the
-/// relative tail stop (0: off), and `METRIC_START=1`
+/// relative tail stop (0: off), `DRIFT=r` the windows' drift test
+/// (`WindowConfig::drift_ratio`; 0: always place the windows on the metric reference,
+/// negative: never), and `METRIC_START=1`
 /// starts the adjustment from the metric chain's cameras (experiments).
 fn config(max_iterations: Option<usize>) -> ProjectiveConfig {
     let mut c = ProjectiveConfig::default();
@@ -109,6 +115,14 @@ fn one(frames: usize, per_frame: usize, max_iterations: Option<usize>, affine_wi
             &config(max_iterations),
             &WindowConfig {
                 projective: !affine_windows,
+                drift_ratio: match std::env::var("DRIFT")
+                    .ok()
+                    .and_then(|v| v.parse::<f64>().ok())
+                {
+                    Some(r) if r < 0.0 => None,
+                    Some(r) => Some(r),
+                    None => WindowConfig::default().drift_ratio,
+                },
                 ..WindowConfig::default()
             },
             &mut Printer,
@@ -191,7 +205,9 @@ fn one_perspective(frames: usize, per_frame: usize, focal: Option<f64>) {
     let (obs, truth) = table(frames, per_frame, 1);
     let n_tracks = truth.len();
     let mut cfg = PerspectiveConfig::default();
-    cfg.intrinsics.image_size = Some([640, 480]);
+    if std::env::var_os("NO_IMAGE_SIZE").is_none() {
+        cfg.intrinsics.image_size = Some([640, 480]);
+    }
     cfg.intrinsics.focal_px = focal;
     let t0 = Instant::now();
     let r = rank3::perspective::fit_observations(

@@ -88,7 +88,50 @@ pub fn fit_observations(
     projective::check_graph(&g)?;
     let t0 = std::time::Instant::now();
     observer.on_event(&crate::Event::StageStarted { stage: "windows" });
-    let mut list: Vec<Window> = windowed::collect_windows(&g, windows)?
+    let (focal, (rotations, translations, mut points, placed)) =
+        chain_windows(&g, s, cfg, projective_cfg, windows)?;
+    place_unplaced(&g, focal, &rotations, &translations, &mut points, &placed);
+    let seconds = t0.elapsed().as_secs_f64();
+    observer.on_event(&crate::Event::StageFinished {
+        stage: "windows",
+        seconds,
+    });
+    let start = PerspectiveModel {
+        focal_px: vec![focal * s; n_frames],
+        principal_point: assumed.principal_point,
+        k1: 0.0,
+        aspect: 1.0,
+        rotations,
+        translations,
+        points,
+    };
+    let estimate_pp = cfg.estimates_principal_point(&assumed);
+    let mut out = adjust_graph(&g, start, cfg, &assumed, estimate_pp, 0, observer)?;
+    out.stages.insert(
+        0,
+        projective::StageReport {
+            stage: "windows".into(),
+            status: crate::SolverStatus::Converged,
+            iterations: n_frames.div_ceil((windows.window - windows.overlap).max(1)),
+            rms_before_px: f64::NAN,
+            rms_after_px: f64::NAN,
+            seconds,
+        },
+    );
+    Ok(out)
+}
+
+/// Steps 1–3 of [`fit_observations`] on the graph `g` (normalised: principal point at 0,
+/// `s` pixels per unit): the windows fitted, the sequence's focal length (normalised units)
+/// and the windows chained by similarities. `O(F)` window fits, `O(n_obs)` chaining.
+fn chain_windows(
+    g: &projective::bundle::Graph,
+    s: f64,
+    cfg: &PerspectiveConfig,
+    projective_cfg: &ProjectiveConfig,
+    windows: &WindowConfig,
+) -> Result<(f64, Chained)> {
+    let mut list: Vec<Window> = windowed::collect_windows(g, windows)?
         .into_iter()
         .map(|(start, end, tracks, meas)| Window {
             start,
@@ -159,37 +202,149 @@ pub fn fit_observations(
             median
         }
     };
-    let (rotations, translations, mut points, placed) = chain(&list, n_frames, n_tracks, windows)?;
-    drop(list);
-    place_unplaced(&g, focal, &rotations, &translations, &mut points, &placed);
-    let seconds = t0.elapsed().as_secs_f64();
-    observer.on_event(&crate::Event::StageFinished {
-        stage: "windows",
-        seconds,
-    });
+    let chained = chain(&list, g.n_cams, g.n_pts, windows)?;
+    Ok((focal, chained))
+}
+
+/// Iterations of the metric adjustment of [`metric_reference`]: enough to take the chained
+/// windows' disagreements (a few pixels where they meet) to the noise level's order, not to
+/// converge (the projective adjustment follows).
+const REFERENCE_ITERATIONS: usize = 10;
+
+/// A metric reconstruction of the projective graph `g` (any similarity normalization of the
+/// pixels) by steps 1–3 of [`fit_observations`] — metric windows chained by similarities, no
+/// global adjustment — as cameras `K [R | t]` (12 per frame, row-major, in `g`'s image
+/// units; `px` pixels per unit) and points (4 per track, `w = 1`), with which tracks a window placed (the others
+/// are zero). The principal point is assumed at the centre of the observations' bounding
+/// box and the focal length is the windows' median, as in [`fit_observations`] without
+/// intrinsics.
+///
+/// The chained windows are then adjusted together for at most [`REFERENCE_ITERATIONS`]
+/// metric bundle adjustment iterations.
+///
+/// Its use: a drift-free reference frame for the projective chain of a long sequence
+/// ([`windowed::projective_start`]). A chain of similarities stays well conditioned however
+/// long it is — a similarity's drift is a slow rotation, translation and scale — while a
+/// chain of projective windows drifts in the 15-dimensional group of homographies, and a
+/// thousand such links leave the early frames numerically lost in the last one's frame.
+///
+/// Cost: as steps 1–3 of [`fit_observations`]: `O(F)` small window fits; memory a copy of
+/// `g`'s positions plus the windows' measurements.
+pub(crate) fn metric_reference(
+    g: &projective::bundle::Graph,
+    px: f64,
+    projective_cfg: &ProjectiveConfig,
+    windows: &WindowConfig,
+) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>)> {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for w in &g.w {
+        for d in 0..2 {
+            lo[d] = lo[d].min(w[d]);
+            hi[d] = hi[d].max(w[d]);
+        }
+    }
+    let side = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+    if !(side > 0.0 && side.is_finite()) {
+        return Err(Error::Degenerate(
+            "the observations span no area: no metric reference".into(),
+        ));
+    }
+    let pp = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+    let local = projective::bundle::Graph {
+        n_cams: g.n_cams,
+        n_pts: g.n_pts,
+        pt_ptr: g.pt_ptr.clone(),
+        cam: g.cam.clone(),
+        w: g.w
+            .iter()
+            .map(|w| [(w[0] - pp[0]) / side, (w[1] - pp[1]) / side])
+            .collect(),
+    };
+    let cfg = PerspectiveConfig::default();
+    let (focal, (rotations, translations, points, placed)) =
+        chain_windows(&local, side * px, &cfg, projective_cfg, windows)?;
+    // A few iterations of the metric adjustment: the chained windows disagree by a few
+    // pixels where they meet (1.7 px RMS on a 300-frame corridor, 0.47 px after it), and
+    // each projective window is mapped onto these points.
+    let sp = side * px;
+    // The adjustment sees the placed tracks only (a track no window placed would start on
+    // a ray at a guessed depth and pull the cameras while these few iterations last).
+    let kept: Vec<usize> = (0..g.n_pts).filter(|&p| placed[p]).collect();
+    let sub = {
+        let mut pt_ptr = Vec::with_capacity(kept.len() + 1);
+        pt_ptr.push(0);
+        let (mut cam, mut w) = (Vec::new(), Vec::new());
+        for &p in &kept {
+            for o in local.track(p) {
+                cam.push(local.cam[o]);
+                w.push(local.w[o]);
+            }
+            pt_ptr.push(cam.len());
+        }
+        projective::bundle::Graph {
+            n_cams: g.n_cams,
+            n_pts: kept.len(),
+            pt_ptr,
+            cam,
+            w,
+        }
+    };
+    drop(local);
     let start = PerspectiveModel {
-        focal_px: vec![focal * s; n_frames],
-        principal_point: assumed.principal_point,
+        focal_px: vec![focal * sp; g.n_cams],
+        principal_point: [0.0, 0.0],
         k1: 0.0,
         aspect: 1.0,
         rotations,
         translations,
-        points,
+        points: kept.iter().map(|&p| points[p]).collect(),
     };
-    let estimate_pp = cfg.estimates_principal_point(&assumed);
-    let mut out = adjust_graph(&g, start, cfg, &assumed, estimate_pp, 0, observer)?;
-    out.stages.insert(
+    let assumed = super::Assumed {
+        principal_point: [0.0, 0.0],
+        principal_point_source: "track bounding box",
+        scale: sp,
+    };
+    let mut adjust_cfg = cfg.clone();
+    adjust_cfg.bundle.max_iterations = REFERENCE_ITERATIONS;
+    let fit = adjust_graph(
+        &sub,
+        start,
+        &adjust_cfg,
+        &assumed,
+        false,
         0,
-        projective::StageReport {
-            stage: "windows".into(),
-            status: crate::SolverStatus::Converged,
-            iterations: n_frames.div_ceil((windows.window - windows.overlap).max(1)),
-            rms_before_px: f64::NAN,
-            rms_after_px: f64::NAN,
-            seconds,
-        },
-    );
-    Ok(out)
+        &mut NoopObserver,
+    )?;
+    drop(sub);
+    let focal = fit.model.focal_px[0] / sp;
+    let mut points = points;
+    for (k, &p) in kept.iter().enumerate() {
+        points[p] = fit.model.points[k];
+    }
+    let PerspectiveModel {
+        rotations,
+        translations,
+        ..
+    } = fit.model;
+    // P = T diag(f, f, 1) [R | t], T = [[side, 0, pp_x], [0, side, pp_y], [0, 0, 1]]: the
+    // local units back to g's.
+    let t = Matrix3::new(side, 0.0, pp[0], 0.0, side, pp[1], 0.0, 0.0, 1.0)
+        * Matrix3::from_diagonal(&Vector3::new(focal, focal, 1.0));
+    let mut cams = Vec::with_capacity(12 * g.n_cams);
+    for (r, tr) in rotations.iter().zip(&translations) {
+        let m = t * r;
+        let c = t * tr;
+        for i in 0..3 {
+            cams.extend_from_slice(&[m[(i, 0)], m[(i, 1)], m[(i, 2)], c[i]]);
+        }
+    }
+    let mut pts = vec![0.0; 4 * g.n_pts];
+    for (p, x) in points.iter().enumerate() {
+        if placed[p] {
+            pts[4 * p..4 * p + 4].copy_from_slice(&[x[0], x[1], x[2], 1.0]);
+        }
+    }
+    Ok((cams, pts, placed))
 }
 
 /// A window's metric fit from scratch (normalised units; `cfg` its settings).
@@ -359,5 +514,55 @@ fn place_unplaced(
         let ray = Vector3::new(g.w[o][0] / focal, g.w[o][1] / focal, 1.0) * depth;
         // X = Rᵀ (X_c − t).
         points[p] = rotations[f].transpose() * (ray - translations[f]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// On a noise-free corridor the metric reference's cameras, mapped back into the
+    /// projective graph's units, reproject every placed track to within a tenth of a pixel
+    /// of its observations, and its points are the truth up to a similarity to within 1 %
+    /// of their spread (a drifted chain would be off by pixels and by tens of %).
+    #[test]
+    fn the_metric_reference_reprojects_a_noise_free_corridor() {
+        let frames = 80;
+        let (obs, truth) = crate::synth::perspective_corridor(frames, 60, 0.0, 1);
+        let n_tracks = truth.len();
+        let order = projective::observation_order(&obs, frames, n_tracks).unwrap();
+        let norm = Normalization::of_points(|| obs.iter().map(|o| o.xy));
+        let g = projective::observation_graph(&obs, &order, frames, n_tracks, &norm);
+        let px = 1.0 / norm.scale;
+        let (cams, pts, placed) = metric_reference(
+            &g,
+            px,
+            &ProjectiveConfig::default(),
+            &WindowConfig::default(),
+        )
+        .unwrap();
+        let mut worst: f64 = 0.0;
+        let (mut est, mut tru) = (Vec::new(), Vec::new());
+        for p in (0..n_tracks).filter(|&p| placed[p]) {
+            let x: [f64; 4] = pts[4 * p..4 * p + 4].try_into().unwrap();
+            for o in g.track(p) {
+                let c: [f64; 12] = cams[12 * g.cam[o]..12 * g.cam[o] + 12].try_into().unwrap();
+                let y = projective::project(&c, &x);
+                worst = worst.max(px * (y[0] - g.w[o][0]).hypot(y[1] - g.w[o][1]));
+            }
+            est.push(Vector3::new(x[0], x[1], x[2]));
+            tru.push(truth[p]);
+        }
+        assert!(
+            est.len() > n_tracks / 2,
+            "{} of {n_tracks} placed",
+            est.len()
+        );
+        // Not exact: the principal point is assumed at the tracks' bounding-box centre (the
+        // truth's is (320, 240)) and the metric adjustment stops after a few iterations.
+        // Measured: worst 0.040 px, structure 0.30 %.
+        assert!(worst < 0.1, "worst reprojection {worst} px");
+        let a = crate::eval::align_similarity(&est, &tru, false).unwrap();
+        assert!(a.relative_rms < 0.01, "structure off by {}", a.relative_rms);
     }
 }

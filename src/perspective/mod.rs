@@ -38,7 +38,7 @@
 //! * B. Triggs, P. McLauchlan, R. Hartley and A. Fitzgibbon, "Bundle adjustment — a modern
 //!   synthesis", 1999 (robust losses §3.2, gauge §9).
 
-mod long;
+pub(crate) mod long;
 pub mod models;
 pub mod selfcal;
 

@@ -18,7 +18,9 @@
 //!   ends far above the noise level of the windows before it (a local minimum of its
 //!   affine completion: 2 windows in 1 000 on a 20 000-frame corridor) is instead extended
 //!   from the chain: its new frames resected from the placed points, its new tracks
-//!   triangulated (`extend_chain`).
+//!   triangulated (`extend_chain`). A chain whose cameras, in one frame, no longer fit the
+//!   data (the drift of a thousand homographies) is placed again window by window on a
+//!   metric reference ([`WindowConfig::drift_ratio`]).
 //! * [`affine_start`]: the affine windows are chained by the affine maps `X ↦ A X + b`
 //!   between shared tracks (linear least squares, ≥ 4 tracks); the cameras become `M A⁻¹`,
 //!   `t − M A⁻¹ b`. Tracks no window placed are left at the origin for the
@@ -64,6 +66,19 @@ pub struct WindowConfig {
     /// with this rule; docs/results.md). When fewer than 8 shared tracks qualify, every
     /// shared track is used. Default 6.
     pub min_anchor_observations: usize,
+    /// With `projective`: when the chained windows, mapped into one frame, reproject at
+    /// more than this many times the median of the windows' own RMS, the frame has drifted
+    /// (a chain of a thousand homographies: a 20 000-frame corridor started its global
+    /// adjustment at 76 420 px) and the windows are placed again, each by its own
+    /// homography onto a metric reference ([`crate::perspective`]'s windows chained by
+    /// similarities, which do not drift into ill-conditioned frames). `None` never does
+    /// this (and keeps no window fits for it); `Some(0.0)` always does. Default `Some(3.0)`.
+    #[serde(default = "default_drift_ratio")]
+    pub drift_ratio: Option<f64>,
+}
+
+fn default_drift_ratio() -> Option<f64> {
+    Some(3.0)
 }
 
 impl Default for WindowConfig {
@@ -75,6 +90,7 @@ impl Default for WindowConfig {
             projective: true,
             local_iterations: 20,
             min_anchor_observations: 6,
+            drift_ratio: default_drift_ratio(),
         }
     }
 }
@@ -172,7 +188,24 @@ pub fn affine_start(g: &Graph, cfg: &WindowConfig) -> Result<(Vec<f64>, Vec<f64>
 /// reconstructions drifts far less than one of affine ones, which leaves the global bundle
 /// adjustment only the accumulated inconsistencies to correct.
 ///
-/// Cost: one window's projective fit per `stride` frames: linear in the frames.
+/// **Drift.** The chain is consistent only up to a slowly varying homography, and over a
+/// thousand windows the composed homographies leave the early frames numerically lost in
+/// one frame (a 20 000-frame corridor: 76 420 px RMS). So the chained cameras are checked:
+/// every placed track triangulated from them and reprojected. Above
+/// [`WindowConfig::drift_ratio`] times the median of the windows' own RMS, a metric
+/// reference is built ([`crate::perspective`]'s windows chained by similarities — a chain of
+/// similarities does not drift into ill-conditioned frames — and a few iterations of its
+/// metric adjustment) and every window's own fit is placed again by its own homography onto
+/// the reference's points (conditioned as Hartley's DLT), with no sliding-window adjustment:
+/// those move the chain's frame a little at each window, a random walk along its soft
+/// projective modes (on a 300-frame corridor 300 px away from the reference after 14
+/// windows), while each window's homography lands it on the reference. The global
+/// adjustment starts from there (a 300-frame corridor: 0.488 px, the same optimum in 16
+/// solves as the chain's in 12).
+///
+/// Cost: one window's projective fit per `stride` frames: linear in the frames; with a
+/// reference, the perspective windows (about as many fits again), `O(n_obs)` per metric
+/// iteration, and the windows' own fits kept (`O(window · tracks)` each).
 ///
 /// After each window it sends an [`Event::Iteration`] (solver `"windows"`, iteration = the
 /// window's index) with the reprojection RMS of the window's observations in the chained
@@ -184,6 +217,188 @@ pub fn projective_start(
     px: f64,
     observer: &mut dyn Observer,
 ) -> Result<(Vec<f64>, Vec<f64>)> {
+    let mut fits = Vec::new();
+    let keep = cfg.drift_ratio.map(|r| (r, &mut fits));
+    let ratio = keep.as_ref().map(|k| k.0);
+    let chained = chain_windows(
+        g,
+        cfg,
+        pcfg,
+        px,
+        None,
+        Fits::Run(keep.map(|k| k.1)),
+        observer,
+    )?;
+    let Some(ratio) = ratio else {
+        return Ok((chained.cams, chained.pts));
+    };
+    let reference_rms = chained.median_window_rms.max(NOISE_FLOOR);
+    let rms = start_rms(g, &chained.cams, &chained.pts);
+    if rms <= ratio * reference_rms {
+        return Ok((chained.cams, chained.pts));
+    }
+    observer.on_event(&Event::Warning {
+        message: &format!(
+            "the chained projective windows, mapped into one frame, reproject at {:.3} px RMS \
+             ({:.1}× their median window; drift ratio {ratio}): the windows are placed again, \
+             each on a metric reference (perspective windows chained by similarities)",
+            px * rms,
+            rms / reference_rms
+        ),
+    });
+    let t0 = std::time::Instant::now();
+    observer.on_event(&Event::StageStarted {
+        stage: "metric-reference",
+    });
+    let reference = crate::perspective::long::metric_reference(g, px, pcfg, cfg);
+    observer.on_event(&Event::StageFinished {
+        stage: "metric-reference",
+        seconds: t0.elapsed().as_secs_f64(),
+    });
+    let (_, ref_pts, ref_placed) = match reference {
+        Ok(r) => r,
+        Err(e) => {
+            observer.on_event(&Event::Warning {
+                message: &format!(
+                    "no metric reference for the projective windows ({e}); the global \
+                     adjustment starts from the chain as it is"
+                ),
+            });
+            return Ok((chained.cams, chained.pts));
+        }
+    };
+    drop(chained);
+    let reference = Reference {
+        pts: ref_pts,
+        placed: ref_placed,
+    };
+    let chained = chain_windows(
+        g,
+        cfg,
+        pcfg,
+        px,
+        Some(&reference),
+        Fits::Replay(fits.into_iter()),
+        observer,
+    )?;
+    Ok((chained.cams, chained.pts))
+}
+
+/// Reprojection RMS (graph units) of the chained cameras `cams`: each placed track (`pts`
+/// non-zero) triangulated from them ([`super::dlt_views`]) and reprojected — the cameras'
+/// figure, as the variable-projection adjustment that follows sees them (a point the
+/// chain placed with a poor depth does not count against them). `O(n_obs)`.
+fn start_rms(g: &Graph, cams: &[f64], pts: &[f64]) -> f64 {
+    let (mut cost, mut n) = (0.0, 0usize);
+    for p in 0..g.n_pts {
+        if pts[4 * p..4 * p + 4].iter().all(|v| *v == 0.0) || g.track(p).len() < 2 {
+            continue;
+        }
+        let x = super::dlt_views(
+            g.track(p)
+                .map(|o| (&cams[12 * g.cam[o]..12 * g.cam[o] + 12], g.w[o])),
+        );
+        for o in g.track(p) {
+            let f = g.cam[o];
+            let c: [f64; 12] = cams[12 * f..12 * f + 12].try_into().expect("12 entries");
+            let y = super::project(&c, &x);
+            let e = (y[0] - g.w[o][0]).powi(2) + (y[1] - g.w[o][1]).powi(2);
+            cost += if e.is_finite() { e } else { f64::MAX.sqrt() };
+            n += 2;
+        }
+    }
+    (cost / n.max(1) as f64).sqrt()
+}
+
+/// Points (4 per track, `w = 1`, graph units) of a drift-free reference reconstruction and
+/// which tracks it placed: the target of every window's homography in
+/// [`chain_windows`]'s second pass.
+struct Reference {
+    pts: Vec<f64>,
+    placed: Vec<bool>,
+}
+
+/// Where [`chain_windows`] gets each window's own projective fit: fitted now (in parallel
+/// batches; kept, in order, when a vector is given), or replayed from an earlier pass.
+enum Fits<'a> {
+    Run(Option<&'a mut Vec<std::result::Result<super::ProjectiveFit, String>>>),
+    Replay(std::vec::IntoIter<std::result::Result<super::ProjectiveFit, String>>),
+}
+
+/// What [`chain_windows`] built: cameras (12 per frame), points (4 per track) and the
+/// median of the windows' own reprojection RMS (graph units).
+struct Chained {
+    cams: Vec<f64>,
+    pts: Vec<f64>,
+    median_window_rms: f64,
+}
+
+/// The homography `G` with `y ≃ G x` over `pairs` (linear: the smallest eigenvector of
+/// `Σ AᵀA` over the rows `y_i (G x)_j − y_j (G x)_i`; ≥ 5 pairs in general position).
+/// `O(n)`.
+fn dlt_homography(pairs: impl Iterator<Item = (Vector4<f64>, Vector4<f64>)>) -> Matrix4<f64> {
+    let mut ata = nalgebra::SMatrix::<f64, 16, 16>::zeros();
+    for (x, y) in pairs {
+        for i in 0..4 {
+            for j in i + 1..4 {
+                // y_i (G x)_j − y_j (G x)_i = Σ_l (y_i x_l G_jl − y_j x_l G_il).
+                let mut row = nalgebra::SVector::<f64, 16>::zeros();
+                for l in 0..4 {
+                    row[4 * j + l] += y[i] * x[l];
+                    row[4 * i + l] -= y[j] * x[l];
+                }
+                ata += row * row.transpose();
+            }
+        }
+    }
+    let e = nalgebra::SymmetricEigen::new(ata);
+    let v = e.eigenvectors.column(e.eigenvalues.imin());
+    Matrix4::from_fn(|r, c| v[4 * r + c])
+}
+
+/// The homography carrying a window's points `x` onto finite reference points `y`
+/// (`w = 1`): [`dlt_homography`] after centring the `y` at their centroid and scaling them
+/// to unit RMS distance (Hartley's conditioning; a window's reference points can lie far
+/// from the reference frame's origin), then undone. `None` for fewer than 6 pairs or
+/// coincident points.
+fn homography_to_reference(pairs: &[(Vector4<f64>, Vector4<f64>)]) -> Option<Matrix4<f64>> {
+    if pairs.len() < 6 {
+        return None;
+    }
+    let n = pairs.len() as f64;
+    let c = pairs.iter().map(|(_, y)| y.xyz()).sum::<Vector3<f64>>() / n;
+    let spread = (pairs
+        .iter()
+        .map(|(_, y)| (y.xyz() - c).norm_squared())
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    if !(spread > 0.0 && spread.is_finite()) {
+        return None;
+    }
+    let s = 1.0 / spread;
+    let mut t = Matrix4::<f64>::identity() * s;
+    t[(3, 3)] = 1.0;
+    for k in 0..3 {
+        t[(k, 3)] = -s * c[k];
+    }
+    let g = dlt_homography(pairs.iter().map(|(x, y)| (*x, t * y)));
+    Some(t.try_inverse()? * g)
+}
+
+/// The projective chain of [`projective_start`]: every window's own fit (`fits`), placed in
+/// order — onto the tracks already placed (re-anchoring the working frame as it goes) or,
+/// with a `reference`, onto the reference's points (one frame throughout: no drift).
+#[allow(clippy::too_many_arguments)]
+fn chain_windows(
+    g: &Graph,
+    cfg: &WindowConfig,
+    pcfg: &super::ProjectiveConfig,
+    px: f64,
+    reference: Option<&Reference>,
+    fits: Fits<'_>,
+    observer: &mut dyn Observer,
+) -> Result<Chained> {
     let nf = g.n_cams;
     let np = g.n_pts;
     let mut cams = vec![f64::NAN; 12 * nf];
@@ -204,10 +419,10 @@ pub fn projective_start(
         let seen = seen_in_window(meas, tracks.len());
         // A window whose own fit failed, or ended far above the chain's noise level (a
         // local minimum of its affine completion), is extended from the chain instead.
-        let reference = median(&window_rms).max(NOISE_FLOOR);
+        let noise = median(&window_rms).max(NOISE_FLOOR);
         let failed = match &fit {
             Err(_) => true,
-            Ok(f) => !first && !(f.rms_px <= FAILED_WINDOW_RATIO * reference),
+            Ok(f) => !first && !(f.rms_px <= FAILED_WINDOW_RATIO * noise),
         };
         let reanchor = if failed && !first {
             let why = match &fit {
@@ -215,7 +430,7 @@ pub fn projective_start(
                 Ok(f) => format!(
                     "its own fit ended at {:.3} px RMS, {:.1}× the chain's median window",
                     px * f.rms_px,
-                    f.rms_px / reference
+                    f.rms_px / noise
                 ),
             };
             extend_chain(
@@ -230,7 +445,7 @@ pub fn projective_start(
                 tracks,
                 meas,
                 &seen,
-                reference,
+                noise,
             )
             .map_err(|e| {
                 Error::Degenerate(format!(
@@ -248,32 +463,35 @@ pub fn projective_start(
             let fit = fit?;
             window_rms.push(fit.rms_px);
             let model = fit.model;
-            let gm = if first {
+            let on_reference = reference.and_then(|r| {
+                let pairs: Vec<_> = reference_anchors(tracks, &r.placed, &seen, cfg)
+                    .into_iter()
+                    .map(|k| {
+                        let p = tracks[k];
+                        (
+                            Vector4::from(model.points[k]),
+                            Vector4::from_column_slice(&r.pts[4 * p..4 * p + 4]),
+                        )
+                    })
+                    .collect();
+                homography_to_reference(&pairs)
+            });
+            let gm = if let Some(gm) = on_reference {
+                gm
+            } else if first {
                 Matrix4::identity()
             } else {
                 let shared = anchors(tracks, &placed, &seen, &placed_n, cfg);
                 if shared.len() < 6 {
                     return Err(too_few_shared(start, end, shared.len(), 6));
                 }
-                let mut ata = nalgebra::SMatrix::<f64, 16, 16>::zeros();
-                for &k in &shared {
-                    let x = model.points[k];
-                    let y = &pts[4 * tracks[k]..4 * tracks[k] + 4];
-                    for i in 0..4 {
-                        for j in i + 1..4 {
-                            // y_i (G x)_j − y_j (G x)_i = Σ_l (y_i x_l G_jl − y_j x_l G_il).
-                            let mut row = nalgebra::SVector::<f64, 16>::zeros();
-                            for l in 0..4 {
-                                row[4 * j + l] += y[i] * x[l];
-                                row[4 * i + l] -= y[j] * x[l];
-                            }
-                            ata += row * row.transpose();
-                        }
-                    }
-                }
-                let e = nalgebra::SymmetricEigen::new(ata);
-                let v = e.eigenvectors.column(e.eigenvalues.imin());
-                Matrix4::from_fn(|r, c| v[4 * r + c])
+                dlt_homography(shared.iter().map(|&k| {
+                    let p = tracks[k];
+                    (
+                        Vector4::from(model.points[k]),
+                        Vector4::from_column_slice(&pts[4 * p..4 * p + 4]),
+                    )
+                }))
             };
             let ginv = gm.try_inverse().ok_or_else(|| {
                 Error::Degenerate(format!(
@@ -305,11 +523,16 @@ pub fn projective_start(
                 placed[p] = true;
                 placed_n[p] = seen[k];
             }
-            Some((ginv, gm))
+            // On the reference the frame is one throughout: no re-anchoring.
+            reference.is_none().then_some((ginv, gm))
         };
-        if !first && cfg.local_iterations > 0 {
+        if !first && cfg.local_iterations > 0 && reference.is_none() {
             // Sliding-window bundle adjustment: this window and the previous one, the
-            // previous window's own frames held fixed (they anchor the gauge).
+            // previous window's own frames held fixed (they anchor the gauge). Not on a
+            // reference: these adjustments move the chain's frame a little at each window
+            // (a random walk along the chain's soft projective modes: 300 px between the
+            // chain and the reference after 14 windows of a 300-frame corridor), while each
+            // window's homography lands it on the reference.
             let lo = start.saturating_sub(cfg.window - cfg.overlap);
             local_refine(
                 g,
@@ -344,12 +567,33 @@ pub fn projective_start(
     // batch is chained in order (memory: one batch of windows).
     let batch_size = 4 * rayon::current_num_threads().max(1);
     let mut batch: Vec<Window> = Vec::new();
+    let mut fits = fits;
     let mut flush = |batch: &mut Vec<Window>| -> Result<()> {
-        let fits: Vec<Result<super::ProjectiveFit>> = batch
-            .par_iter()
-            .map(|(start, end, tracks, meas)| fit_window(*start, *end, tracks, meas, cfg, pcfg))
-            .collect();
-        for ((start, end, tracks, meas), fit) in batch.drain(..).zip(fits) {
+        let fitted: Vec<Result<super::ProjectiveFit>> = match &mut fits {
+            Fits::Run(keep) => {
+                let fitted: Vec<_> = batch
+                    .par_iter()
+                    .map(|(start, end, tracks, meas)| {
+                        fit_window(*start, *end, tracks, meas, cfg, pcfg)
+                    })
+                    .collect();
+                if let Some(keep) = keep {
+                    keep.extend(fitted.iter().map(|f| match f {
+                        Ok(f) => Ok(f.clone()),
+                        Err(e) => Err(e.to_string()),
+                    }));
+                }
+                fitted
+            }
+            Fits::Replay(it) => (0..batch.len())
+                .map(|_| match it.next() {
+                    Some(Ok(f)) => Ok(f),
+                    Some(Err(e)) => Err(Error::Degenerate(e)),
+                    None => Err(Error::Degenerate("window fit not recorded".into())),
+                })
+                .collect(),
+        };
+        for ((start, end, tracks, meas), fit) in batch.drain(..).zip(fitted) {
             place(start, end, &tracks, &meas, fit)?;
         }
         Ok(())
@@ -363,7 +607,29 @@ pub fn projective_start(
     })?;
     flush(&mut batch)?;
     frame.finish(&mut cams, &mut pts);
-    Ok((cams, pts))
+    Ok(Chained {
+        cams,
+        pts,
+        median_window_rms: median(&window_rms),
+    })
+}
+
+/// The window's tracks (indices into `tracks`) that anchor its homography onto the
+/// reference: placed there and seen in ≥ [`WindowConfig::min_anchor_observations`] frames
+/// of the window; every placed one when fewer than 8 qualify.
+fn reference_anchors(
+    tracks: &[usize],
+    placed: &[bool],
+    seen: &[usize],
+    cfg: &WindowConfig,
+) -> Vec<usize> {
+    let strong: Vec<usize> = (0..tracks.len())
+        .filter(|&k| placed[tracks[k]] && seen[k] >= cfg.min_anchor_observations)
+        .collect();
+    if strong.len() >= 8 {
+        return strong;
+    }
+    (0..tracks.len()).filter(|&k| placed[tracks[k]]).collect()
 }
 
 /// The projective frame the chain is built in. A chain kept in window 0's frame drifts
