@@ -9,12 +9,16 @@ use std::fmt::Write as _;
 use std::io::Read;
 use std::path::Path;
 
+use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 use super::{Id, TrackTable, order_ids};
 use crate::{Error, Result};
 
 const FIELDS: [&str; 4] = ["frame", "track", "x", "y"];
+
+/// Integer ids below this are looked up in a table (at most 16 MB) instead of a hash map.
+const DIRECT_IDS: usize = 1 << 22;
 
 /// Parses CSV text; returns the table and the reader's warnings.
 pub fn parse(text: &str, path: &Path) -> Result<(TrackTable, Vec<String>)> {
@@ -26,6 +30,9 @@ pub fn parse(text: &str, path: &Path) -> Result<(TrackTable, Vec<String>)> {
 /// tables are usually frame-major, so the frame id repeats row after row).
 #[derive(Default)]
 struct Ids {
+    /// Index of each small non-negative integer id (`u32::MAX`: not seen), grown on demand
+    /// up to `DIRECT_IDS` entries: ids numbered from 0, the common case, skip the hash.
+    direct: Vec<u32>,
     ints: FxHashMap<i64, u32>,
     strs: FxHashMap<Box<str>, u32>,
     ids: Vec<Id>,
@@ -40,8 +47,40 @@ impl Ids {
             return Ok(*i);
         }
         let text = std::str::from_utf8(field).map_err(|_| "is not valid UTF-8".to_string())?;
+        let i = self.intern(Id::parse(text));
+        match &mut self.last {
+            Some((bytes, j)) => {
+                bytes.clear();
+                bytes.extend_from_slice(field);
+                *j = i;
+            }
+            None => self.last = Some((field.to_vec(), i)),
+        }
+        Ok(i)
+    }
+
+    /// Adds the ids of `later` (read from a later part of the input) that are new here, in
+    /// their order of first appearance; returns, per index of `later`, its index here.
+    fn merge(&mut self, later: Ids) -> Vec<u32> {
+        later.ids.into_iter().map(|id| self.intern(id)).collect()
+    }
+
+    /// The index of `id`, added at the end when it is new.
+    fn intern(&mut self, id: Id) -> u32 {
         let next = self.ids.len() as u32;
-        let i = match Id::parse(text) {
+        match id {
+            Id::Int(v) if (0..DIRECT_IDS as i64).contains(&v) => {
+                let v = v as usize;
+                if v >= self.direct.len() {
+                    self.direct
+                        .resize((v + 1).max(2 * self.direct.len()).min(DIRECT_IDS), u32::MAX);
+                }
+                if self.direct[v] == u32::MAX {
+                    self.direct[v] = next;
+                    self.ids.push(Id::Int(v as i64));
+                }
+                self.direct[v]
+            }
             Id::Int(v) => *self.ints.entry(v).or_insert_with(|| {
                 self.ids.push(Id::Int(v));
                 next
@@ -54,16 +93,7 @@ impl Ids {
                     next
                 }
             },
-        };
-        match &mut self.last {
-            Some((bytes, j)) => {
-                bytes.clear();
-                bytes.extend_from_slice(field);
-                *j = i;
-            }
-            None => self.last = Some((field.to_vec(), i)),
         }
-        Ok(i)
     }
 
     /// The ids in rank3's order ([`order_ids`]) and, per index of first appearance, its new
@@ -86,19 +116,153 @@ impl Ids {
     }
 }
 
+/// Bytes parsed by one thread at a time: a block of the file is
+/// `PIECE_BYTES × threads` and is split at line ends into that many pieces.
+const PIECE_BYTES: usize = 4 << 20;
+
 /// Parses CSV from a reader (a file is streamed, never held whole in memory); returns the
 /// table and the reader's warnings.
 ///
+/// Both cores are used: the file is read a block at a time (`PIECE_BYTES` per thread), the
+/// block is cut at line ends into one piece per thread and the pieces are parsed in
+/// parallel, each with its own id tables, which are then merged in file order (so ids keep
+/// their order of first appearance). A block that holds a quote or a lone carriage return,
+/// where a line end need not end a record, and everything after it, is parsed by one
+/// streaming reader instead, with the same results. Errors name the first bad line in file
+/// order, as a sequential reader would.
+///
 /// Cost: one pass over the bytes with one hash look-up per id (none when the frame id
 /// repeats), then a sort of the observations by (frame, track) to build the table and find
-/// repeated pairs: `O(n log n)` time and 24 bytes per observation plus 4 for its line.
+/// repeated pairs: `O(n log n)` time and 24 bytes per observation plus 4 for its line, plus
+/// one block of text.
 pub fn parse_reader<R: Read>(reader: R, path: &Path) -> Result<(TrackTable, Vec<String>)> {
-    let mut rdr = ::csv::ReaderBuilder::new()
-        .has_headers(true)
+    let threads = rayon::current_num_threads().max(1);
+    parse_in_pieces(reader, path, PIECE_BYTES, threads)
+}
+
+/// [`parse_reader`] with blocks of `pieces` pieces of about `piece_bytes` each.
+fn parse_in_pieces<R: Read>(
+    mut reader: R,
+    path: &Path,
+    piece_bytes: usize,
+    pieces: usize,
+) -> Result<(TrackTable, Vec<String>)> {
+    let block = piece_bytes * pieces;
+    let mut data = Vec::new();
+    let mut eof = fill(&mut reader, &mut data, block).map_err(|e| Error::io(path, e))?;
+    let mut rows = Rows::default();
+    let header_end = memchr::memchr(b'\n', &data).filter(|&nl| plain(&data[..=nl]));
+    let Some(nl) = header_end else {
+        // A quoted or unusual header: one streaming reader for the whole file.
+        let mut rdr = csv_reader(std::io::Cursor::new(data).chain(reader), true);
+        let (col, warnings) = header(&mut rdr, path)?;
+        rows.read_all(&mut rdr, &col, 0, None, path)?;
+        return rows.finish(path, warnings);
+    };
+    let (col, warnings) = header(&mut csv_reader(&data[..nl], true), path)?;
+    data.drain(..=nl);
+    // `data` starts at the start of line `line`.
+    let mut line = 2;
+    loop {
+        if !eof && data.len() < block {
+            eof = fill(&mut reader, &mut data, block).map_err(|e| Error::io(path, e))?;
+        }
+        let cut = if eof {
+            Some(data.len())
+        } else {
+            memchr::memrchr(b'\n', &data).map(|i| i + 1)
+        };
+        let Some(cut) = cut.filter(|&c| plain(&data[..c])) else {
+            // No line end in a whole block, or quotes: stream the rest with one reader.
+            let mut rdr = csv_reader(std::io::Cursor::new(data).chain(reader), false);
+            rows.read_all(&mut rdr, &col, line - 1, None, path)?;
+            break;
+        };
+        let parts = split_at_lines(&data[..cut], pieces);
+        let mut starts = Vec::with_capacity(parts.len());
+        for piece in &parts {
+            starts.push(line);
+            line += memchr::memchr_iter(b'\n', piece).count();
+        }
+        let parsed: Vec<Result<Rows>> = parts
+            .par_iter()
+            .zip(&starts)
+            .map(|(piece, &start)| {
+                let mut part = Rows::default();
+                part.read_all(
+                    &mut csv_reader(*piece, false),
+                    &col,
+                    start - 1,
+                    Some(piece),
+                    path,
+                )?;
+                Ok(part)
+            })
+            .collect();
+        for part in parsed {
+            rows.append(part?);
+        }
+        data.drain(..cut);
+        if eof && data.is_empty() {
+            break;
+        }
+    }
+    rows.finish(path, warnings)
+}
+
+/// A CSV reader with rank3's settings: flexible rows, the header's fields trimmed (a
+/// record's fields are trimmed where they are read, [`Rows::push`]: the csv crate's record
+/// trim allocates a new record per row).
+fn csv_reader<R: Read>(reader: R, has_headers: bool) -> ::csv::Reader<R> {
+    ::csv::ReaderBuilder::new()
+        .has_headers(has_headers)
         .flexible(true)
-        .trim(::csv::Trim::All)
+        .trim(::csv::Trim::Headers)
         .buffer_capacity(1 << 20)
-        .from_reader(reader);
+        .from_reader(reader)
+}
+
+/// Reads from `reader` until `data` holds at least `block` bytes or the input ends; true at
+/// the end of the input.
+fn fill<R: Read>(reader: &mut R, data: &mut Vec<u8>, block: usize) -> std::io::Result<bool> {
+    while data.len() < block {
+        let want = (block - data.len()) as u64;
+        let got = reader.by_ref().take(want).read_to_end(data)?;
+        if got == 0 {
+            return Ok(true);
+        }
+    }
+    Ok(false)
+}
+
+/// True when every line end in `text` ends a record: no quote (a quoted field may hold a
+/// line end) and no carriage return other than in `\r\n` (a lone `\r` also ends a record).
+fn plain(text: &[u8]) -> bool {
+    memchr::memchr(b'"', text).is_none()
+        && memchr::memchr_iter(b'\r', text).all(|i| text.get(i + 1) == Some(&b'\n'))
+}
+
+/// `text` cut after line ends into at most `n` pieces of about equal size.
+fn split_at_lines(text: &[u8], n: usize) -> Vec<&[u8]> {
+    let mut pieces = Vec::with_capacity(n);
+    let mut from = 0;
+    for k in 1..n {
+        let target = (text.len() * k / n).max(from);
+        match memchr::memchr(b'\n', &text[target..]) {
+            Some(i) if target + i + 1 < text.len() => {
+                pieces.push(&text[from..target + i + 1]);
+                from = target + i + 1;
+            }
+            _ => break,
+        }
+    }
+    pieces.push(&text[from..]);
+    pieces
+}
+
+/// The header of `rdr`: the column of each of `frame, track, x, y`, and a warning naming
+/// the extra columns.
+fn header<R: Read>(rdr: &mut ::csv::Reader<R>, path: &Path) -> Result<([usize; 4], Vec<String>)> {
     let headers = rdr
         .headers()
         .map_err(|e| Error::parse(path, 1, "header", e.to_string()))?
@@ -141,26 +305,79 @@ pub fn parse_reader<R: Read>(reader: R, path: &Path) -> Result<(TrackTable, Vec<
             extra.join(", ")
         ));
     }
+    Ok((col, warnings))
+}
 
-    let mut obs: Vec<(u32, u32, f64, f64)> = Vec::new();
-    let mut lines: Vec<u32> = Vec::new();
-    let mut frames = Ids::default();
-    let mut tracks = Ids::default();
-    let mut rec = ::csv::ByteRecord::new();
-    loop {
-        match rdr.read_byte_record(&mut rec) {
-            Ok(true) => {}
-            Ok(false) => break,
-            Err(e) => {
-                let line = e.position().map_or(0, |p| p.line() as usize);
-                return Err(Error::parse(path, line, "row", e.to_string()));
+/// Observations read so far: `(frame, track, x, y)` with frame and track as indices into
+/// `frames` / `tracks` (order of first appearance), and each one's line.
+#[derive(Default)]
+struct Rows {
+    obs: Vec<(u32, u32, f64, f64)>,
+    lines: Vec<u32>,
+    frames: Ids,
+    tracks: Ids,
+}
+
+impl Rows {
+    /// Reads every record of `rdr` (columns `col`). Line numbers: the reader's, offset by
+    /// `line_offset`; or, given the `text` the reader reads (a piece that starts at line
+    /// `line_offset + 1`), counted up to the record's first byte — exact also after a
+    /// CRLF, where the csv crate's count is one short (it numbers a record before consuming
+    /// the `\n` left over from the previous record's `\r\n`).
+    fn read_all<R: Read>(
+        &mut self,
+        rdr: &mut ::csv::Reader<R>,
+        col: &[usize; 4],
+        line_offset: usize,
+        text: Option<&[u8]>,
+        path: &Path,
+    ) -> Result<()> {
+        let mut rec = ::csv::ByteRecord::new();
+        // Line ends counted in `text[..counted]`.
+        let (mut counted, mut ends) = (0, 0);
+        loop {
+            match rdr.read_byte_record(&mut rec) {
+                Ok(true) => {}
+                Ok(false) => return Ok(()),
+                Err(e) => {
+                    let line = e.position().map_or(0, |p| p.line() as usize);
+                    return Err(Error::parse(path, line + line_offset, "row", e.to_string()));
+                }
             }
+            let line = match (text, rec.position()) {
+                (Some(text), Some(pos)) => {
+                    // The reader's offset is where it started reading: before the line
+                    // ends of the previous record and of any blank lines.
+                    let mut at = (pos.byte() as usize).min(text.len());
+                    while matches!(text.get(at), Some(b'\r' | b'\n')) {
+                        at += 1;
+                    }
+                    // A line end or two: a plain loop beats memchr's set-up here.
+                    ends += text[counted.min(at)..at]
+                        .iter()
+                        .filter(|&&c| c == b'\n')
+                        .count();
+                    counted = counted.max(at);
+                    line_offset + 1 + ends
+                }
+                (_, pos) => pos.map_or(0, |p| p.line() as usize) + line_offset,
+            };
+            self.push(&rec, col, line, path)?;
         }
-        let line = rec.position().map_or(0, |p| p.line() as usize);
-        if rec.iter().all(|f| f.is_empty()) {
-            continue;
+    }
+
+    /// One record (`line` its line in the file); an all-empty record is skipped.
+    fn push(
+        &mut self,
+        rec: &::csv::ByteRecord,
+        col: &[usize; 4],
+        line: usize,
+        path: &Path,
+    ) -> Result<()> {
+        if rec.iter().all(|f| f.trim_ascii().is_empty()) {
+            return Ok(());
         }
-        let field = |k: usize| -> &[u8] { rec.get(col[k]).unwrap_or(b"") };
+        let field = |k: usize| -> &[u8] { rec.get(col[k]).unwrap_or(b"").trim_ascii() };
         for k in 0..2 {
             if field(k).is_empty() {
                 return Err(Error::parse(
@@ -190,67 +407,91 @@ pub fn parse_reader<R: Read>(reader: R, path: &Path) -> Result<(TrackTable, Vec<
             _ => {}
         }
         let num = |k: usize, b: &[u8]| -> Result<f64> {
-            let s = String::from_utf8_lossy(b);
             match std::str::from_utf8(b).ok().map(str::parse::<f64>) {
                 Some(Ok(v)) if v.is_finite() => Ok(v),
-                Some(Ok(_)) => Err(Error::parse(
-                    path,
-                    line,
-                    FIELDS[k],
-                    format!(
-                        "`{}` is not finite (leave a missing observation out)",
-                        super::excerpt(&s)
-                    ),
-                )),
-                _ => Err(Error::parse(
-                    path,
-                    line,
-                    FIELDS[k],
-                    format!("`{}` is not a number", super::excerpt(&s)),
-                )),
+                parsed => {
+                    let s = String::from_utf8_lossy(b);
+                    let what = if matches!(parsed, Some(Ok(_))) {
+                        "is not finite (leave a missing observation out)"
+                    } else {
+                        "is not a number"
+                    };
+                    Err(Error::parse(
+                        path,
+                        line,
+                        FIELDS[k],
+                        format!("`{}` {what}", super::excerpt(&s)),
+                    ))
+                }
             }
         };
         let (x, y) = (num(2, xs)?, num(3, ys)?);
-        let f = frames
+        let f = self
+            .frames
             .index(field(0))
             .map_err(|m| Error::parse(path, line, "frame", format!("the frame id {m}")))?;
-        let p = tracks
+        let p = self
+            .tracks
             .index(field(1))
             .map_err(|m| Error::parse(path, line, "track", format!("the track id {m}")))?;
-        obs.push((f, p, x, y));
-        lines.push(u32::try_from(line).unwrap_or(u32::MAX));
+        self.obs.push((f, p, x, y));
+        self.lines.push(u32::try_from(line).unwrap_or(u32::MAX));
+        Ok(())
     }
-    if obs.is_empty() {
-        return Err(Error::EmptyTable {
-            path: Some(path.to_path_buf()),
-            reason: "no observation rows after the header".into(),
-        });
+
+    /// Appends the rows of a later part of the file, its ids merged into these.
+    fn append(&mut self, part: Rows) {
+        let frame_map = self.frames.merge(part.frames);
+        let track_map = self.tracks.merge(part.tracks);
+        self.obs.extend(
+            part.obs
+                .into_iter()
+                .map(|(f, p, x, y)| (frame_map[f as usize], track_map[p as usize], x, y)),
+        );
+        self.lines.extend(part.lines);
     }
-    let (frame_ids, frame_map) = frames.finish();
-    let (track_ids, track_map) = tracks.finish();
-    for o in &mut obs {
-        o.0 = frame_map[o.0 as usize];
-        o.1 = track_map[o.1 as usize];
+
+    /// The table, ids in rank3's order; a repeated (frame, track) pair is an error naming
+    /// both lines.
+    fn finish(self, path: &Path, warnings: Vec<String>) -> Result<(TrackTable, Vec<String>)> {
+        let Rows {
+            mut obs,
+            lines,
+            frames,
+            tracks,
+        } = self;
+        if obs.is_empty() {
+            return Err(Error::EmptyTable {
+                path: Some(path.to_path_buf()),
+                reason: "no observation rows after the header".into(),
+            });
+        }
+        let (frame_ids, frame_map) = frames.finish();
+        let (track_ids, track_map) = tracks.finish();
+        for o in &mut obs {
+            o.0 = frame_map[o.0 as usize];
+            o.1 = track_map[o.1 as usize];
+        }
+        TrackTable::from_observations(frame_ids, track_ids, &obs)
+            .map(|t| (t, warnings))
+            .map_err(|d| {
+                let (first, second) = if lines[d.first] <= lines[d.second] {
+                    (d.first, d.second)
+                } else {
+                    (d.second, d.first)
+                };
+                let o = obs[first];
+                Error::parse(
+                    path,
+                    lines[second] as usize,
+                    "track",
+                    format!(
+                        "frame {} track {} is given twice (first on line {})",
+                        d.frame_ids[o.0 as usize], d.track_ids[o.1 as usize], lines[first]
+                    ),
+                )
+            })
     }
-    TrackTable::from_observations(frame_ids, track_ids, &obs)
-        .map(|t| (t, warnings))
-        .map_err(|d| {
-            let (first, second) = if lines[d.first] <= lines[d.second] {
-                (d.first, d.second)
-            } else {
-                (d.second, d.first)
-            };
-            let o = obs[first];
-            Error::parse(
-                path,
-                lines[second] as usize,
-                "track",
-                format!(
-                    "frame {} track {} is given twice (first on line {})",
-                    d.frame_ids[o.0 as usize], d.track_ids[o.1 as usize], lines[first]
-                ),
-            )
-        })
 }
 
 /// Writes the observed entries as `frame,track,x,y` rows, frame-major.
@@ -313,6 +554,78 @@ mod tests {
         assert_eq!(t.track_ids()[1], Id::Str("edge, left".into()));
         let (back, _) = parse(&to_string(&t), p()).unwrap();
         assert_eq!(back, t);
+    }
+
+    /// A table written with CRLF line ends, ids out of order and a blank line, and a few
+    /// string ids quoted (with a comma and a line end inside) when `quoted`.
+    fn long_text(rows: usize, quoted: bool) -> String {
+        let mut s = String::from("x,Frame,y,track,score\r\n");
+        for i in 0..rows {
+            let (f, p) = ((i * 7) % 13, (i * 31) % 997);
+            let track = if quoted && i % 97 == 50 {
+                format!("\"t{p}, left\nside\"")
+            } else {
+                format!("{p}")
+            };
+            let _ = write!(s, "{}.25,{f},{},{track},0.5\r\n", i % 640, i % 480);
+            if i == rows / 3 {
+                s.push_str("\r\n");
+            }
+        }
+        s
+    }
+
+    fn pieces(txt: &str, piece_bytes: usize, n: usize) -> Result<(TrackTable, Vec<String>)> {
+        parse_in_pieces(txt.as_bytes(), p(), piece_bytes, n)
+    }
+
+    #[test]
+    fn pieces_read_what_one_reader_reads() {
+        for quoted in [false, true] {
+            let txt = long_text(3000, quoted);
+            let one = pieces(&txt, 1 << 30, 1).unwrap();
+            assert_eq!(one.1.len(), 1, "one warning for the extra column");
+            // Duplicates of (frame, track) would be an error: 3000 rows, 13 × 997 pairs.
+            assert_eq!(one.0.n_observed(), 3000);
+            for (piece_bytes, n) in [(1, 2), (64, 3), (1000, 2), (4096, 5)] {
+                let many = pieces(&txt, piece_bytes, n).unwrap();
+                assert_eq!(
+                    many, one,
+                    "quoted {quoted}, pieces of {piece_bytes} bytes × {n}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn pieces_name_the_first_bad_line_of_the_file() {
+        let mut txt = long_text(2000, false);
+        let lines: Vec<&str> = txt.split("\r\n").collect();
+        // Line 1500 (1-based) gets a bad x, line 1800 a bad y: the first is named.
+        let mut edited: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+        edited[1499] = edited[1499].replacen(".25", ".2x", 1);
+        edited[1799] = "1.5,2,abc,4,0.5".to_string();
+        txt = edited.join("\r\n");
+        for (piece_bytes, n) in [(1 << 30, 1), (64, 2), (700, 4)] {
+            let (l, f, m) =
+                crate::table::parse_error_parts(pieces(&txt, piece_bytes, n).unwrap_err());
+            assert_eq!((l, f.as_str()), (1500, "x"), "{m}");
+        }
+        // A pair given twice, in two different pieces: both lines named.
+        let mut txt = long_text(2000, false);
+        txt.push_str("3.25,0,1,0,0.5\r\n");
+        for (piece_bytes, n) in [(1 << 30, 1), (64, 2), (700, 4)] {
+            let (l, f, m) =
+                crate::table::parse_error_parts(pieces(&txt, piece_bytes, n).unwrap_err());
+            assert_eq!((l, f.as_str()), (2003, "track"), "{m}");
+            assert!(m.contains("first on line 2"), "{m}");
+        }
+    }
+
+    #[test]
+    fn crlf_lines_are_numbered_as_lines() {
+        let (l, f, _) = err("x,frame,y,track\r\n1,0,2,0\r\n\r\n1x,0,2,1\r\n");
+        assert_eq!((l, f.as_str()), (4, "x"));
     }
 
     fn err(txt: &str) -> (usize, String, String) {

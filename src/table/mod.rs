@@ -318,7 +318,7 @@ impl TrackTable {
             "observation index out of range"
         );
         let mut order: Vec<u32> = (0..obs.len() as u32).collect();
-        order.sort_unstable_by_key(|&i| {
+        rayon::slice::ParallelSliceMut::par_sort_unstable_by_key(order.as_mut_slice(), |&i| {
             let o = &obs[i as usize];
             (o.0, o.1, i)
         });
