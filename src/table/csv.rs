@@ -151,7 +151,9 @@ fn parse_in_pieces<R: Read>(
     let mut data = Vec::new();
     let mut eof = fill(&mut reader, &mut data, block).map_err(|e| Error::io(path, e))?;
     let mut rows = Rows::default();
-    let header_end = memchr::memchr(b'\n', &data).filter(|&nl| plain(&data[..=nl]));
+    // (A blank first line goes to the streaming reader, which skips it as before.)
+    let header_end = memchr::memchr(b'\n', &data)
+        .filter(|&nl| plain(&data[..=nl]) && !data[..nl].trim_ascii().is_empty());
     let Some(nl) = header_end else {
         // A quoted or unusual header: one streaming reader for the whole file.
         let mut rdr = csv_reader(std::io::Cursor::new(data).chain(reader), true);
@@ -620,6 +622,12 @@ mod tests {
             assert_eq!((l, f.as_str()), (2003, "track"), "{m}");
             assert!(m.contains("first on line 2"), "{m}");
         }
+    }
+
+    #[test]
+    fn a_blank_first_line_is_skipped() {
+        let (t, _) = parse("\nframe,track,x,y\n0,0,1,2\n", p()).unwrap();
+        assert_eq!(t.get(0, 0), Some([1.0, 2.0]));
     }
 
     #[test]
