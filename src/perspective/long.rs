@@ -261,12 +261,13 @@ pub(crate) fn metric_reference(
             .collect(),
     };
     let cfg = PerspectiveConfig::default();
+    // Pixels per local unit.
+    let sp = side * px;
     let (focal, (rotations, translations, points, placed)) =
-        chain_windows(&local, side * px, &cfg, projective_cfg, windows)?;
+        chain_windows(&local, sp, &cfg, projective_cfg, windows)?;
     // A few iterations of the metric adjustment: the chained windows disagree by a few
     // pixels where they meet (1.7 px RMS on a 300-frame corridor, 0.47 px after it), and
     // each projective window is mapped onto these points.
-    let sp = side * px;
     // The adjustment sees the placed tracks only (a track no window placed would start on
     // a ray at a guessed depth and pull the cameras while these few iterations last).
     let kept: Vec<usize> = (0..g.n_pts).filter(|&p| placed[p]).collect();
