@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::reconstruction::Reconstruction;
-use crate::table::dense::write_matrix;
+use crate::table::dense::write_matrix_to;
 use crate::{Error, Id, Result};
 
 /// Paths of the files [`write_all`] wrote.
@@ -52,7 +52,7 @@ pub fn write_all_with(
     let mut set = crate::atomic::FileSet::new();
     set.add(&json, rec.to_json())?;
     let completed = if rec.sparse.is_none() {
-        set.add(&completed, completed_text(rec))?;
+        set.add_with(&completed, |w| write_completed_to(rec, w))?;
         Some(completed)
     } else {
         None
@@ -68,29 +68,29 @@ pub fn write_all_with(
 
 /// The affine prediction of every track in every frame, dense 2F×N in the input's frame and
 /// track order (set-aside frames/tracks are `nan`), with comment lines naming the ids.
+/// Streamed: the text is formatted a batch of rows at a time and never held whole, nor is
+/// the 2F×N matrix ([`Reconstruction::completed_value`]).
 pub fn write_completed(rec: &Reconstruction, path: &Path) -> Result<()> {
-    crate::atomic::write(path, completed_text(rec))
+    crate::atomic::write_with(path, |w| write_completed_to(rec, w))
 }
 
-/// The text of [`write_completed`].
-fn completed_text(rec: &Reconstruction) -> String {
-    let m = rec.completed_matrix();
+/// The text of [`write_completed`], written to `w`.
+fn write_completed_to(rec: &Reconstruction, w: &mut impl std::io::Write) -> std::io::Result<()> {
+    let (rows, cols) = (2 * rec.input_frame_ids.len(), rec.input_track_ids.len());
     let ids = |v: &[crate::Id]| {
         v.iter()
             .map(|i| i.to_string())
             .collect::<Vec<_>>()
             .join(" ")
     };
-    let mut s = format!(
-        "# rank3 completed measurement matrix (affine fit, before the metric upgrade): {} rows \
-         (x, y per frame) x {} tracks; nan = set aside\n# frames: {}\n# tracks: {}\n",
-        m.nrows(),
-        m.ncols(),
+    write!(
+        w,
+        "# rank3 completed measurement matrix (affine fit, before the metric upgrade): {rows} \
+         rows (x, y per frame) x {cols} tracks; nan = set aside\n# frames: {}\n# tracks: {}\n",
         ids(&rec.input_frame_ids),
         ids(&rec.input_track_ids)
-    );
-    write_matrix(&mut s, m.nrows(), m.ncols(), |r, c| m[(r, c)]);
-    s
+    )?;
+    write_matrix_to(w, rows, cols, rec.completed_value())
 }
 
 /// Binary little-endian PLY with `float x, y, z` per point (and `uchar inlier`).

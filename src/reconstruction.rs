@@ -1259,48 +1259,75 @@ impl Reconstruction {
     /// tracks are predicted from their own observations given the fitted cameras.
     ///
     /// A sparse-pipeline reconstruction ([`Reconstruction::sparse`]) has no affine
-    /// prediction: its matrix holds the metric model's. `O(F·N)` memory either way.
+    /// prediction: its matrix holds the metric model's. `O(F·N)` memory either way;
+    /// [`Self::completed_value`] gives its entries without it.
     pub fn completed_matrix(&self) -> Mat<f64> {
-        let (f, n) = (self.input_frame_ids.len(), self.input_track_ids.len());
-        let mut out = Mat::from_fn(2 * f, n, |_, _| f64::NAN);
-        // Writes every kept frame's prediction of the kept tracks (`kept(kf, kp)`) and of the
-        // outlier tracks (`outlier(kf, k)`) at their input positions.
-        let mut fill = |kept: &dyn Fn(usize, usize) -> [f64; 2],
-                        outlier: &dyn Fn(usize, usize) -> [f64; 2]| {
-            for (kf, &fi) in self.kept_frames.iter().enumerate() {
-                for (kp, &pi) in self.kept_tracks.iter().enumerate() {
-                    let q = kept(kf, kp);
-                    out[(2 * fi, pi)] = q[0];
-                    out[(2 * fi + 1, pi)] = q[1];
-                }
-                for (k, &pi) in self.outlier_tracks.iter().enumerate() {
-                    let q = outlier(kf, k);
-                    out[(2 * fi, pi)] = q[0];
-                    out[(2 * fi + 1, pi)] = q[1];
-                }
+        let value = self.completed_value();
+        Mat::from_fn(
+            2 * self.input_frame_ids.len(),
+            self.input_track_ids.len(),
+            value,
+        )
+    }
+
+    /// Entry `(r, c)` of [`Self::completed_matrix`], computed on demand (`O(F + N)` memory
+    /// for the index maps; each entry costs one projection).
+    pub fn completed_value(&self) -> impl Fn(usize, usize) -> f64 + Sync + '_ {
+        /// What an input track is in the fit.
+        #[derive(Clone, Copy)]
+        enum Track {
+            SetAside,
+            Kept(usize),
+            Outlier(usize),
+        }
+        let mut frame_pos = vec![None; self.input_frame_ids.len()];
+        for (kf, &fi) in self.kept_frames.iter().enumerate() {
+            frame_pos[fi] = Some(kf);
+        }
+        let mut track_pos = vec![Track::SetAside; self.input_track_ids.len()];
+        for (kp, &pi) in self.kept_tracks.iter().enumerate() {
+            track_pos[pi] = Track::Kept(kp);
+        }
+        for (k, &pi) in self.outlier_tracks.iter().enumerate() {
+            track_pos[pi] = Track::Outlier(k);
+        }
+        let v2 = |v: nalgebra::Vector2<f64>| [v[0], v[1]];
+        // The prediction of kept track `kp` (or outlier `k`) in kept frame `kf`.
+        let kept = move |kf: usize, kp: usize| -> [f64; 2] {
+            if self.sparse.is_some() {
+                v2(self.model.project(kf, kp))
+            } else if let Some(pr) = &self.perspective {
+                pr.model.project(kf, kp)
+            } else if let Some(pr) = &self.projective {
+                pr.model.project(kf, kp)
+            } else {
+                let a = &self.affine_prediction;
+                [a[(2 * kf, kp)], a[(2 * kf + 1, kp)]]
             }
         };
-        let v2 = |v: nalgebra::Vector2<f64>| [v[0], v[1]];
-        if self.sparse.is_some() {
-            fill(&|kf, kp| v2(self.model.project(kf, kp)), &|kf, k| {
+        let outlier = move |kf: usize, k: usize| -> [f64; 2] {
+            if self.sparse.is_some() {
                 v2(self.outlier_model.project(kf, k))
-            });
-        } else if let Some(pr) = &self.perspective {
-            fill(&|kf, kp| pr.model.project(kf, kp), &|kf, k| {
+            } else if let Some(pr) = &self.perspective {
                 pr.model.project_point(kf, &pr.outlier_points[k])
-            });
-        } else if let Some(pr) = &self.projective {
-            fill(&|kf, kp| pr.model.project(kf, kp), &|kf, k| {
+            } else if let Some(pr) = &self.projective {
                 projective::project(&pr.model.cameras[kf], &pr.outlier_points[k])
-            });
-        } else {
-            let (a, o) = (&self.affine_prediction, &self.outlier_prediction);
-            fill(
-                &|kf, kp| [a[(2 * kf, kp)], a[(2 * kf + 1, kp)]],
-                &|kf, k| [o[(2 * kf, k)], o[(2 * kf + 1, k)]],
-            );
+            } else {
+                let o = &self.outlier_prediction;
+                [o[(2 * kf, k)], o[(2 * kf + 1, k)]]
+            }
+        };
+        move |r, c| {
+            let Some(kf) = frame_pos[r / 2] else {
+                return f64::NAN;
+            };
+            let q = match track_pos[c] {
+                Track::SetAside => return f64::NAN,
+                Track::Kept(kp) => kept(kf, kp),
+                Track::Outlier(k) => outlier(kf, k),
+            };
+            q[r % 2]
         }
-        out
     }
 
     /// Serializes to the `reconstruction.json` document: `"schema"`

@@ -92,6 +92,7 @@ pub fn write_outputs(
         keep.extend(rank3::mesh::export::MESH_FILES);
     }
     rank3::output::remove_stale(out, &keep)?;
+    let write_start = std::time::Instant::now();
     let written = rank3::output::write_all_with(
         &rec,
         out,
@@ -108,12 +109,13 @@ pub fn write_outputs(
         }
     }
     write_colmap(&rec, table, out)?;
+    let write_seconds = write_start.elapsed().as_secs_f64();
     print_summary(&rec, out);
     let mut files: Vec<&Path> = vec![&written.json];
     files.extend(written.completed.as_deref());
     files.push(&written.ply);
     detail!(
-        "wrote {}{}",
+        "wrote {}{} in {:.2} s",
         files
             .iter()
             .map(|p| p.display().to_string())
@@ -123,7 +125,8 @@ pub fn write_outputs(
             format!(" and {}", rank3::mesh::export::MESH_FILES.join(", "))
         } else {
             String::new()
-        }
+        },
+        write_seconds
     );
     if let Some(m) = &mesh {
         if let Some(t) = &m.report.texture

@@ -280,6 +280,7 @@ pub fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     )?;
     // The table is read before the recording opens (opening it replaces an existing .rrd,
     // which bad input must not destroy).
+    let read_start = std::time::Instant::now();
     let loaded = match (&a.tracks, &a.x, &a.y) {
         (Some(t), _, _) => read_tracks(t)?,
         (None, Some(x), Some(y)) => rank3::table::read_xy(x, y)?,
@@ -304,8 +305,9 @@ pub fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         warning!("{w}");
     }
     let t = &loaded.table;
+    let read_seconds = read_start.elapsed().as_secs_f64();
     info!(
-        "read {}: {} frames × {} tracks, {} observations ({:.1} % filled)",
+        "read {}: {} frames × {} tracks, {} observations ({:.1} % filled){}",
         match (&a.tracks, &a.y) {
             (None, Some(y)) => format!("{} and {}", loaded.path.display(), y.display()),
             _ => loaded.path.display().to_string(),
@@ -313,7 +315,12 @@ pub fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         t.n_frames(),
         t.n_tracks(),
         t.n_observed(),
-        100.0 * t.fill()
+        100.0 * t.fill(),
+        if verbosity::verbose() {
+            format!(" in {read_seconds:.2} s")
+        } else {
+            String::new()
+        }
     );
     let stated = match &a.images {
         Some(images) => rank3::tracking::FrameSource::pixel_aspect_of(images)?,
@@ -331,6 +338,7 @@ pub fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
             &a.out,
         );
     }
+    let fit_start = std::time::Instant::now();
     #[cfg(feature = "rerun")]
     let rec = rank3::recording::reconstruct_recorded(recording.as_ref(), t, &config)?;
     #[cfg(feature = "rerun")]
@@ -345,6 +353,10 @@ pub fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
     )?;
     #[cfg(not(feature = "rerun"))]
     let rec = Reconstruction::from_tracks(t, &config)?;
+    detail!(
+        "reconstruction: {:.2} s wall",
+        fit_start.elapsed().as_secs_f64()
+    );
     write_outputs(
         rec,
         t,

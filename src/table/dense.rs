@@ -264,20 +264,141 @@ pub(crate) fn write_matrix(
     cols: usize,
     value: impl Fn(usize, usize) -> f64,
 ) {
-    for r in 0..rows {
-        for c in 0..cols {
-            if c > 0 {
-                s.push(' ');
+    let mut bytes = Vec::new();
+    // Writing to a Vec cannot fail.
+    let _ = write_matrix_to(&mut bytes, rows, cols, value);
+    // Only ASCII is written.
+    s.push_str(&String::from_utf8_lossy(&bytes));
+}
+
+/// Bytes of text per batch of rows (about 8 MB): with two batches in flight, the memory
+/// [`write_matrix_to`] holds whatever the matrix's size.
+const WRITE_BATCH_BYTES: usize = 8 << 20;
+
+/// Writes a rows×cols matrix to `w`, one row per line, values separated by one space, as
+/// [`push_f64`] formats them, a batch of rows (about [`WRITE_BATCH_BYTES`] of text) at a
+/// time, so the text is never held whole. Two threads work as a pipeline: the caller gathers
+/// a batch's values and writes the text of the batch before it, while a second thread
+/// formats. `O(rows·cols)` time, `O(WRITE_BATCH_BYTES)` memory.
+///
+/// Measured on the 2 000 × 20 000 `completed.txt` (740 MB, 2-vCPU machine): 10.9 s with one
+/// `write!` per value into one string; 3.7–4.3 s this way. Rows formatted in parallel by
+/// rayon took 7.7–9.5 s in the pipeline's process (4.2 s on one rayon thread), although the
+/// same code on a fresh process ran 1.4× faster on two threads than on one.
+pub(crate) fn write_matrix_to(
+    w: &mut impl std::io::Write,
+    rows: usize,
+    cols: usize,
+    value: impl Fn(usize, usize) -> f64,
+) -> std::io::Result<()> {
+    write_matrix_batched(w, rows, cols, WRITE_BATCH_BYTES, value)
+}
+
+/// Columns per block of [`write_matrix_batched`]'s gather.
+const GATHER_COLS: usize = 64;
+
+/// [`write_matrix_to`] with `batch_bytes` of text per batch.
+fn write_matrix_batched(
+    w: &mut impl std::io::Write,
+    rows: usize,
+    cols: usize,
+    batch_bytes: usize,
+    value: impl Fn(usize, usize) -> f64,
+) -> std::io::Result<()> {
+    use std::sync::mpsc;
+    // ~18 bytes per value: the rows of one batch.
+    let batch = (batch_bytes / (18 * cols.max(1))).max(1);
+    // Two buffers circulate: the caller gathers a batch's values into one while the
+    // formatting thread turns the other's into text.
+    let (to_format, formatted_in) = mpsc::sync_channel::<(Vec<f64>, Vec<u8>, usize)>(1);
+    let (to_write, formatted_out) = mpsc::sync_channel::<(Vec<f64>, Vec<u8>)>(2);
+    std::thread::scope(|scope| -> std::io::Result<()> {
+        scope.spawn(move || {
+            let mut buf = ryu::Buffer::new();
+            for (vals, mut text, nr) in formatted_in {
+                text.clear();
+                for i in 0..nr {
+                    let row = &vals[i * cols..(i + 1) * cols];
+                    for (c, &v) in row.iter().enumerate() {
+                        if c > 0 {
+                            text.push(b' ');
+                        }
+                        push_f64(&mut text, v, &mut buf);
+                    }
+                    text.push(b'\n');
+                }
+                if to_write.send((vals, text)).is_err() {
+                    return;
+                }
             }
-            let v = value(r, c);
-            if v.is_nan() {
-                s.push_str("nan");
-            } else {
-                let _ = write!(s, "{v}");
+        });
+        let mut spare = vec![(Vec::new(), Vec::new()), (Vec::new(), Vec::new())];
+        let mut in_flight = 0;
+        let mut start = 0;
+        let mut result = Ok(());
+        while start < rows || in_flight > 0 {
+            if start < rows && in_flight < 2 {
+                let (mut vals, text) = spare.pop().unwrap_or_default();
+                let end = (start + batch).min(rows);
+                let nr = end - start;
+                vals.clear();
+                vals.resize(nr * cols, 0.0);
+                // Gathered by blocks of columns, so that a column-major source (faer's
+                // matrices) is read a few cache lines per column and the rows are written in
+                // runs (a blocked transpose).
+                for c0 in (0..cols).step_by(GATHER_COLS) {
+                    let c1 = (c0 + GATHER_COLS).min(cols);
+                    for i in 0..nr {
+                        for c in c0..c1 {
+                            vals[i * cols + c] = value(start + i, c);
+                        }
+                    }
+                }
+                if to_format.send((vals, text, nr)).is_err() {
+                    break;
+                }
+                in_flight += 1;
+                start = end;
+                continue;
             }
+            let Ok((vals, text)) = formatted_out.recv() else {
+                break;
+            };
+            in_flight -= 1;
+            if result.is_ok() {
+                result = w.write_all(&text);
+            }
+            if result.is_err() {
+                break;
+            }
+            spare.push((vals, text));
         }
-        s.push('\n');
+        drop(to_format);
+        result
+    })
+}
+
+/// Appends `v` as `format!("{v}")` would: the shortest decimal that reads back to `v`, never
+/// an exponent, `inf`, `-inf`; NaN is written `nan`. (When two shortest decimals are
+/// equally close to `v`, the last digit may differ from `Display`'s; both read back to `v`.)
+/// Through Ryū (Adams, "Ryū: fast
+/// float-to-string conversion", PLDI 2018), which finds the same shortest digits 3–4× faster
+/// than the standard formatter; the values Ryū would print with an exponent (|v| < 1e-5 or
+/// ≥ 1e16) fall back to the standard formatter.
+pub(crate) fn push_f64(out: &mut Vec<u8>, v: f64, buf: &mut ryu::Buffer) {
+    use std::io::Write as _;
+    if v.is_nan() {
+        out.extend_from_slice(b"nan");
+        return;
     }
+    if v.is_finite() {
+        let t = buf.format_finite(v).as_bytes();
+        if !t.contains(&b'e') {
+            out.extend_from_slice(t.strip_suffix(b".0").unwrap_or(t));
+            return;
+        }
+    }
+    let _ = write!(out, "{v}");
 }
 
 #[cfg(test)]
@@ -286,6 +407,92 @@ mod tests {
 
     fn p() -> &'static Path {
         Path::new("m.txt")
+    }
+
+    /// The fast formatter writes what `Display` writes, over every magnitude and the
+    /// special values: the same text, or (a tie between two shortest decimals) text as
+    /// short that reads back to the same value.
+    #[test]
+    fn push_f64_matches_display() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let mut values = vec![
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.1,
+            1e-5,
+            9.99e-6,
+            1e15,
+            1e16,
+            123.456,
+            f64::MAX,
+            f64::MIN_POSITIVE,
+            5e-324,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        for _ in 0..20_000 {
+            let e: i32 = rng.random_range(-30..30);
+            let m: f64 = rng.random_range(-10.0..10.0);
+            values.push(m * 10f64.powi(e));
+            values.push(f64::from_bits(rng.random::<u64>()));
+            values.push((rng.random_range(-5000.0..5000.0f64) * 1000.0).round() / 1000.0);
+        }
+        let mut buf = ryu::Buffer::new();
+        let mut ties = 0;
+        let n = values.len();
+        for v in values {
+            let mut out = Vec::new();
+            push_f64(&mut out, v, &mut buf);
+            let got = String::from_utf8(out).unwrap();
+            let want = if v.is_nan() {
+                "nan".into()
+            } else {
+                format!("{v}")
+            };
+            if got != want {
+                assert_eq!(got.len(), want.len(), "{v:e}: {got} vs {want}");
+                assert_eq!(got.parse::<f64>().unwrap(), v, "{v:e}: {got}");
+                ties += 1;
+            }
+        }
+        assert!(ties * 1000 < n, "{ties} of {n} differ from Display");
+    }
+
+    /// Batches of rows write what one pass writes.
+    #[test]
+    fn write_matrix_to_in_batches_is_row_major_text() {
+        let (rows, cols) = (7, 3);
+        let value = |r: usize, c: usize| {
+            if r == 2 {
+                f64::NAN
+            } else {
+                r as f64 + 0.5 * c as f64
+            }
+        };
+        let mut got = Vec::new();
+        write_matrix_to(&mut got, rows, cols, value).unwrap();
+        let mut want = String::new();
+        for r in 0..rows {
+            let row: Vec<String> = (0..cols)
+                .map(|c| match value(r, c) {
+                    v if v.is_nan() => "nan".into(),
+                    v => format!("{v}"),
+                })
+                .collect();
+            want.push_str(&row.join(" "));
+            want.push('\n');
+        }
+        assert_eq!(String::from_utf8(got).unwrap(), want);
+        // Batches of one row per thread, and of several rows.
+        for batch_bytes in [1, 18 * cols * 2, 18 * cols * 100] {
+            let mut got = Vec::new();
+            write_matrix_batched(&mut got, rows, cols, batch_bytes, value).unwrap();
+            assert_eq!(String::from_utf8(got).unwrap(), want, "{batch_bytes}");
+        }
     }
 
     #[test]
