@@ -1984,7 +1984,7 @@ fn fit_selection(
     }
     let min_points = min_points_per_frame(config, fit_table.is_complete());
     let (fit, set_aside, fit_frames, fit_tracks) =
-        fit_table.set_aside(config.min_frames_per_track, min_points);
+        fit_table.into_set_aside(config.min_frames_per_track, min_points);
     check_size(&fit)?;
     let used_frames: Vec<usize> = fit_frames.iter().map(|&f| kept_frames[f]).collect();
     let used_tracks: Vec<usize> = fit_tracks

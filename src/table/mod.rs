@@ -555,6 +555,11 @@ impl TrackTable {
     /// The sub-table of the given frames and tracks (indices into this table, in order).
     /// `O(n_obs of the frames + N)`.
     pub fn select(&self, frames: &[usize], tracks: &[usize]) -> TrackTable {
+        let identity =
+            |v: &[usize], n: usize| v.len() == n && v.iter().enumerate().all(|(i, &k)| i == k);
+        if identity(frames, self.n_frames()) && identity(tracks, self.n_tracks()) {
+            return self.clone();
+        }
         let mut new_index = vec![u32::MAX; self.n_tracks()];
         for (k, &p) in tracks.iter().enumerate() {
             new_index[p] = k as u32;
@@ -594,10 +599,38 @@ impl TrackTable {
         min_frames_per_track: usize,
         min_points_per_frame: usize,
     ) -> (TrackTable, Vec<SetAside>, Vec<usize>, Vec<usize>) {
+        let (out, frames, tracks) = self.set_aside_plan(min_frames_per_track, min_points_per_frame);
+        (self.select(&frames, &tracks), out, frames, tracks)
+    }
+
+    /// [`Self::set_aside`] of a table that is no longer needed: when nothing is set aside it
+    /// is returned as it is, without the copy.
+    pub fn into_set_aside(
+        self,
+        min_frames_per_track: usize,
+        min_points_per_frame: usize,
+    ) -> (TrackTable, Vec<SetAside>, Vec<usize>, Vec<usize>) {
+        let (out, frames, tracks) = self.set_aside_plan(min_frames_per_track, min_points_per_frame);
+        let kept = if frames.len() == self.n_frames() && tracks.len() == self.n_tracks() {
+            self
+        } else {
+            self.select(&frames, &tracks)
+        };
+        (kept, out, frames, tracks)
+    }
+
+    /// What [`Self::set_aside`] sets aside and the indices of the frames and tracks it keeps.
+    fn set_aside_plan(
+        &self,
+        min_frames_per_track: usize,
+        min_points_per_frame: usize,
+    ) -> (Vec<SetAside>, Vec<usize>, Vec<usize>) {
         let (nf, nt) = (self.n_frames(), self.n_tracks());
         let mut keep_f = vec![true; nf];
         let mut keep_t = vec![true; nt];
         let mut out = Vec::new();
+        // Whether every kept frame sees every kept track (after the last pass).
+        let mut complete;
         loop {
             let mut changed = false;
             let mut track_count = vec![0usize; nt];
@@ -623,6 +656,8 @@ impl TrackTable {
                     });
                 }
             }
+            let n_kept_t = keep_t.iter().filter(|&&k| k).count();
+            complete = n_kept_t > 0;
             for f in 0..nf {
                 if !keep_f[f] {
                     continue;
@@ -631,6 +666,7 @@ impl TrackTable {
                     .iter()
                     .filter(|e| keep_t[e.track as usize])
                     .count();
+                complete &= c == n_kept_t;
                 if c < min_points_per_frame {
                     keep_f[f] = false;
                     changed = true;
@@ -643,8 +679,9 @@ impl TrackTable {
                     });
                 }
             }
-            if !changed {
-                // Blocks of frames placed by fewer than MIN_SHARED_TRACKS tracks.
+            // Blocks of frames placed by fewer than MIN_SHARED_TRACKS tracks (none when every
+            // frame sees every track: then all frames are one block).
+            if !changed && !complete {
                 changed = self.set_aside_weak_blocks(&mut keep_f, &keep_t, &mut out);
             }
             if !changed {
@@ -654,7 +691,12 @@ impl TrackTable {
         // Connected components of the bipartite frame–track graph.
         let frames: Vec<usize> = (0..nf).filter(|&f| keep_f[f]).collect();
         let tracks: Vec<usize> = (0..nt).filter(|&p| keep_t[p]).collect();
-        let comps = self.components(&frames, &tracks);
+        // (A table where every frame sees every track is one component.)
+        let comps = if complete {
+            Vec::new()
+        } else {
+            self.components(&frames, &tracks)
+        };
         if comps.len() > 1 {
             let best = comps
                 .iter()
@@ -695,7 +737,7 @@ impl TrackTable {
         }
         let frames: Vec<usize> = (0..nf).filter(|&f| keep_f[f]).collect();
         let tracks: Vec<usize> = (0..nt).filter(|&p| keep_t[p]).collect();
-        (self.select(&frames, &tracks), out, frames, tracks)
+        (out, frames, tracks)
     }
 
     /// Sets aside the frames of every *weakly joined* block: frames that the kept tracks join
@@ -983,6 +1025,30 @@ mod tests {
         assert_eq!(out[0].id, Id::Int(4));
         assert_eq!(out[1].kind, SetAsideKind::Frame);
         assert_eq!(out[1].id, Id::Int(3));
+    }
+
+    /// A table whose kept part is complete keeps everything, including after a first pass
+    /// that set a track aside (the completeness shortcut skips the block tests only then);
+    /// `into_set_aside` returns such a table without a copy and agrees with `set_aside`.
+    #[test]
+    fn set_aside_complete_and_into_set_aside() {
+        let t = table(&[&[1, 1, 1, 1], &[1, 1, 1, 1], &[1, 1, 1, 1]]);
+        let (kept, out, frames, tracks) = t.set_aside(2, 3);
+        assert!(out.is_empty());
+        assert_eq!((frames, tracks), (vec![0, 1, 2], vec![0, 1, 2, 3]));
+        assert_eq!(kept, t);
+        let (owned, out2, _, _) = t.clone().into_set_aside(2, 3);
+        assert!(out2.is_empty());
+        assert_eq!(owned, t);
+        // Complete once track 4 (seen once) is set aside.
+        let t = table(&[&[1, 1, 1, 1, 0], &[1, 1, 1, 1, 0], &[1, 1, 1, 1, 1]]);
+        let a = t.set_aside(2, 3);
+        let b = t.clone().into_set_aside(2, 3);
+        assert_eq!(a.2, vec![0, 1, 2]);
+        assert_eq!(a.3, vec![0, 1, 2, 3]);
+        assert_eq!((a.0.clone(), a.2.clone(), a.3.clone()), (b.0, b.2, b.3));
+        assert_eq!(a.1.len(), 1);
+        assert!(a.0.is_complete());
     }
 
     #[test]
