@@ -132,16 +132,10 @@ impl MetricModel {
 
     /// RMS reprojection error over observed scalars (x, y counted separately).
     pub fn rms(&self, meas: &Measurements) -> f64 {
-        let mut ss = 0.0;
-        let mut n = 0usize;
-        for (f, p) in meas.observed_pairs() {
+        meas.rms_of(|f, p| {
             let q = self.project(f, p);
-            let dx = q[0] - meas.w[(2 * f, p)];
-            let dy = q[1] - meas.w[(2 * f + 1, p)];
-            ss += dx * dx + dy * dy;
-            n += 2;
-        }
-        if n == 0 { 0.0 } else { (ss / n as f64).sqrt() }
+            [q[0], q[1]]
+        })
     }
 
     /// Per-point linear least-squares triangulation given the cameras:
@@ -154,10 +148,11 @@ impl MetricModel {
         let n = meas.n_points();
         let mut ata = vec![Matrix3::<f64>::zeros(); n];
         let mut atb = vec![Vector3::<f64>::zeros(); n];
-        for (f, p) in meas.observed_pairs() {
+        // Each point's sums in increasing frame order, as before the tiled walk.
+        meas.for_each_observed(|f, p| {
             let w = [meas.w[(2 * f, p)], meas.w[(2 * f + 1, p)]];
             self.accumulate(f, w, &mut ata[p], &mut atb[p]);
-        }
+        });
         let mut failed = Vec::new();
         for p in 0..n {
             match solve_point(&ata[p], &atb[p]) {

@@ -704,7 +704,7 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             .filter(|e| suspect.binary_search(&e.0).is_err())
             .copied()
             .collect();
-        cur = TrackSubspace::with_exclusions(meas, &config.subspace, &exclude);
+        cur = est.with_exclusions_shared(meas, &exclude);
         if let Some((m, excluded)) =
             cur.refit_reporting(&model, &inl, config.subspace.final_als_iterations)
         {
@@ -1192,34 +1192,29 @@ fn median_in_place(v: &mut [f64]) -> f64 {
 }
 
 /// RMS distance of the observations to their frame's centroid (per coordinate), pixels.
+/// Two passes of [`Measurements::for_each_observed`], `O(F·N)`.
 fn observation_spread(meas: &Measurements) -> f64 {
-    let (f, n) = (meas.n_frames(), meas.n_points());
-    let (mut ss, mut cnt) = (0.0, 0usize);
-    for fr in 0..f {
-        for r in [2 * fr, 2 * fr + 1] {
-            let (mut sum, mut k) = (0.0, 0usize);
-            for p in 0..n {
-                if meas.visible[fr * n + p] {
-                    sum += meas.w[(r, p)];
-                    k += 1;
-                }
-            }
-            if k == 0 {
-                continue;
-            }
-            let mean = sum / k as f64;
-            for p in 0..n {
-                if meas.visible[fr * n + p] {
-                    ss += (meas.w[(r, p)] - mean).powi(2);
-                    cnt += 1;
-                }
-            }
+    let rows = 2 * meas.n_frames();
+    let (mut sum, mut count) = (vec![0.0; rows], vec![0usize; rows / 2]);
+    meas.for_each_observed(|f, p| {
+        sum[2 * f] += meas.w[(2 * f, p)];
+        sum[2 * f + 1] += meas.w[(2 * f + 1, p)];
+        count[f] += 1;
+    });
+    let mean: Vec<f64> = (0..rows)
+        .map(|r| sum[r] / count[r / 2].max(1) as f64)
+        .collect();
+    let mut ss = vec![0.0; rows];
+    meas.for_each_observed(|f, p| {
+        for r in [2 * f, 2 * f + 1] {
+            ss[r] += (meas.w[(r, p)] - mean[r]).powi(2);
         }
-    }
+    });
+    let cnt = 2 * count.iter().sum::<usize>();
     if cnt == 0 {
         0.0
     } else {
-        (ss / cnt as f64).sqrt()
+        (ss.iter().sum::<f64>() / cnt as f64).sqrt()
     }
 }
 
