@@ -358,9 +358,13 @@ impl ProjectiveResult {
         let fitted = |f: usize, p: usize| model.project(f, p);
         let outliers =
             |f: usize, k: usize| projective::project(&model.cameras[f], &outlier_points[k]);
+        let (sums, outlier_sums) = (
+            ResidualSums::new(&fitted, meas),
+            ResidualSums::new(&outliers, outlier_meas),
+        );
         let cameras = (0..fit.n_frames())
             .map(|f| {
-                let (ss, n) = frame_residuals(&fitted, meas, f);
+                let (ss, n) = sums.frames[f];
                 ProjectiveFrame {
                     frame: fit.frame_ids()[f].clone(),
                     p: model.camera_matrix(f),
@@ -371,7 +375,7 @@ impl ProjectiveResult {
             .collect();
         let mut points: Vec<(usize, ProjectivePoint)> = Vec::new();
         for (p, &input_p) in used_tracks.iter().enumerate() {
-            let (ss, n) = point_residuals(&fitted, meas, p);
+            let (ss, n) = sums.points[p];
             points.push((
                 input_p,
                 ProjectivePoint {
@@ -384,7 +388,7 @@ impl ProjectiveResult {
             ));
         }
         for (k, &p) in outlier_kept.iter().enumerate() {
-            let (ss, n) = point_residuals(&outliers, outlier_meas, k);
+            let (ss, n) = outlier_sums.points[k];
             points.push((
                 kept_tracks[p],
                 ProjectivePoint {
@@ -572,24 +576,23 @@ impl PerspectiveResult {
         .collect();
         let fitted = |f: usize, p: usize| model.project(f, p);
         let outliers = |f: usize, k: usize| model.project_point(f, &outlier_points[k]);
+        let (sums, outlier_sums) = (
+            ResidualSums::new(&fitted, meas),
+            ResidualSums::new(&outliers, outlier_meas),
+        );
         let cameras = (0..nf)
-            .map(|f| {
-                let res = frame_residuals(&fitted, meas, f);
-                Self::frame(model, f, fit.frame_ids()[f].clone(), res)
-            })
+            .map(|f| Self::frame(model, f, fit.frame_ids()[f].clone(), sums.frames[f]))
             .collect();
         let points = point_results(
             &TrackSets {
                 fit,
-                meas,
                 used_tracks,
                 kept,
                 kept_tracks,
                 outlier_kept,
-                outlier_meas,
             },
-            (&fitted, |p| model.points[p]),
-            (&outliers, |k| outlier_points[k]),
+            (&sums, |p| model.points[p]),
+            (&outlier_sums, |k| outlier_points[k]),
         );
         let downweighted = pf
             .downweighted
@@ -1074,9 +1077,9 @@ pub struct Reconstruction {
     /// The affine structure `Ŝ` (3×N', one column per kept track) before the metric upgrade.
     #[serde(skip)]
     pub affine_structure: Mat<f64>,
-    /// Affine prediction `M̂Ŝ + t1ᵀ` of every kept frame and track (2F'×N').
+    /// Affine prediction `M̂Ŝ + t1ᵀ` of every kept frame and track (2F'×N'), entry by entry.
     #[serde(skip)]
-    pub affine_prediction: Mat<f64>,
+    pub affine_prediction: AffinePrediction,
     /// Affine prediction of the outlier tracks in the used frames (2F'×n_outliers).
     #[serde(skip)]
     pub outlier_prediction: Mat<f64>,
@@ -1302,7 +1305,7 @@ impl Reconstruction {
                 pr.model.project(kf, kp)
             } else {
                 let a = &self.affine_prediction;
-                [a[(2 * kf, kp)], a[(2 * kf + 1, kp)]]
+                [a.value(2 * kf, kp), a.value(2 * kf + 1, kp)]
             }
         };
         let outlier = move |kf: usize, k: usize| -> [f64; 2] {
@@ -1459,12 +1462,12 @@ fn robust_stage(
         let (mut all, mut selected) = (vec![0usize; nf], vec![0usize; nf]);
         let mut is_flagged = std::collections::HashSet::new();
         is_flagged.extend(sel.flagged.iter().copied());
-        for (f, p) in meas_all.observed_pairs() {
+        meas_all.for_each_observed(|f, p| {
             all[f] += 1;
             if sel.inlier[p] && !is_flagged.contains(&(f, p)) {
                 selected[f] += 1;
             }
-        }
+        });
         if let Some(f) = (0..nf).find(|&f| selected[f] < 6 && all[f] >= 6) {
             warnings.push(format!(
                 "the affine robust pass leaves {} track(s) in frame {} (of {}), fewer than a                  projective camera needs (6); the projective model judges every track instead",
@@ -1834,16 +1837,21 @@ fn assemble(
     for w in &warnings {
         timer.observer.on_event(&Event::Warning { message: w });
     }
-    let affine_prediction = Mat::from_fn(affine.m_hat.nrows(), affine.s_hat.ncols(), |r, p| {
-        let mut v = affine.t[r];
-        for k in 0..affine.m_hat.ncols() {
-            v += affine.m_hat[(r, k)] * affine.s_hat[(k, p)];
-        }
-        v
-    });
+    let affine_prediction = AffinePrediction {
+        m: affine.m_hat,
+        s: affine.s_hat.clone(),
+        t: affine.t,
+        aspect: 1.0,
+        origin: [0.0, 0.0],
+    };
+    let outlier_model = outliers.model;
+    let (sums, outlier_sums) = (
+        ResidualSums::new(&metric_predictor(&model), &meas),
+        ResidualSums::new(&metric_predictor(&outlier_model), &outliers.meas),
+    );
     let frames = (0..fit.n_frames())
         .map(|f| {
-            let (ss, n) = frame_residuals(&metric_predictor(&model), &meas, f);
+            let (ss, n) = sums.frames[f];
             let r = model.rotations[f].matrix();
             FrameResult {
                 frame: fit.frame_ids()[f].clone(),
@@ -1855,21 +1863,16 @@ fn assemble(
             }
         })
         .collect();
-    let outlier_model = outliers.model;
     let points = point_results(
         &TrackSets {
             fit: &fit,
-            meas: &meas,
             used_tracks: &used_tracks,
             kept: kept_table,
             kept_tracks: &kept_tracks,
             outlier_kept: &outlier_kept,
-            outlier_meas: &outliers.meas,
         },
-        (&metric_predictor(&model), |p| model.points[p]),
-        (&metric_predictor(&outlier_model), |k| {
-            outlier_model.points[k]
-        }),
+        (&sums, |p| model.points[p]),
+        (&outlier_sums, |k| outlier_model.points[k]),
     );
     let outlier_tracks: Vec<usize> = outlier_kept.iter().map(|&p| kept_tracks[p]).collect();
     Reconstruction {
@@ -1919,6 +1922,7 @@ fn assemble(
 }
 
 struct Fitted {
+    /// The fit's frames and tracks, ids only (no observations: those are in `meas`).
     fit: TrackTable,
     meas: Measurements,
     /// Tracks and frames the selection starved (set aside after hiding entries).
@@ -1993,6 +1997,11 @@ fn fit_selection(
         .collect();
     let outlier_kept: Vec<usize> = (0..kept.n_tracks()).filter(|&p| !inlier[p]).collect();
     let meas = fit.measurements();
+    // From here on the fit's observations are in `meas`; the table keeps its ids only (the
+    // observations are freed now, not at the end of the function).
+    let ids_only = TrackTable::new(fit.frame_ids().to_vec(), fit.track_ids().to_vec());
+    drop(fit);
+    let fit = ids_only;
     timer.observer.on_event(&Event::FitSelection {
         frames: &used_frames,
         tracks: &used_tracks,
@@ -2174,7 +2183,7 @@ fn fit_selection(
     if whole_flops > PRETEST_FLOPS
         && let Some((frames, tracks)) = pretest_subset(&meas)
     {
-        let sub = fit.select(&frames, &tracks).measurements();
+        let sub = meas.select(&frames, &tracks);
         let test = timer.run("projective-pretest", |_| part_pretest(&sub, config));
         match test {
             Some((delta, threshold, affine_rms, projective_rms)) if delta <= threshold => {
@@ -2603,42 +2612,35 @@ fn rms_of(ss: f64, n_pairs: usize) -> f64 {
 }
 
 /// Sum of squared residuals and number of observed pairs among `pairs` (frame, track).
-/// Sum of squared residuals `‖predict(f, p) − w_fp‖²` and number of observed pairs among
-/// `pairs` (frame, track): the per-frame and per-track figures of every camera model.
-fn residual_sum(
-    predict: &impl Fn(usize, usize) -> [f64; 2],
-    meas: &Measurements,
-    pairs: impl Iterator<Item = (usize, usize)>,
-) -> (f64, usize) {
-    pairs
-        .filter(|&(f, p)| meas.is_visible(f, p))
-        .fold((0.0, 0), |(ss, n), (f, p)| {
+/// Per frame and per track: the sum of squared residuals `‖predict(f, p) − w_fp‖²` over
+/// the observed pairs and their number — the per-frame and per-track figures of every
+/// camera model. One walk of [`Measurements::for_each_observed`] (each frame's sum in
+/// track order, each track's in frame order), `O(F·N)`.
+struct ResidualSums {
+    frames: Vec<(f64, usize)>,
+    points: Vec<(f64, usize)>,
+}
+
+impl ResidualSums {
+    fn new(predict: &impl Fn(usize, usize) -> [f64; 2], meas: &Measurements) -> Self {
+        let mut frames = vec![(0.0, 0); meas.n_frames()];
+        let mut points = vec![(0.0, 0); meas.n_points()];
+        meas.for_each_observed(|f, p| {
             let q = predict(f, p);
             let (dx, dy) = (q[0] - meas.w[(2 * f, p)], q[1] - meas.w[(2 * f + 1, p)]);
-            (ss + dx * dx + dy * dy, n + 1)
-        })
-}
-
-fn frame_residuals(
-    predict: &impl Fn(usize, usize) -> [f64; 2],
-    meas: &Measurements,
-    f: usize,
-) -> (f64, usize) {
-    residual_sum(predict, meas, (0..meas.n_points()).map(|p| (f, p)))
-}
-
-fn point_residuals(
-    predict: &impl Fn(usize, usize) -> [f64; 2],
-    meas: &Measurements,
-    p: usize,
-) -> (f64, usize) {
-    residual_sum(predict, meas, (0..meas.n_frames()).map(|f| (f, p)))
+            // (`ss + dx² + dy²`, the order of the sums before the one walk.)
+            for acc in [&mut frames[f], &mut points[p]] {
+                acc.0 = acc.0 + dx * dx + dy * dy;
+                acc.1 += 1;
+            }
+        });
+        Self { frames, points }
+    }
 }
 
 /// The fit's tracks and the outlier tracks, as the result blocks list them.
 struct TrackSets<'a> {
     fit: &'a TrackTable,
-    meas: &'a Measurements,
     /// Input index of each fit track.
     used_tracks: &'a [usize],
     kept: &'a TrackTable,
@@ -2646,22 +2648,15 @@ struct TrackSets<'a> {
     kept_tracks: &'a [usize],
     /// Kept-table indices of the outlier tracks.
     outlier_kept: &'a [usize],
-    outlier_meas: &'a Measurements,
 }
 
 /// Point results in the input's track order: the fit's tracks and the outlier tracks
-/// interleaved, each with its 3D point (`(predictor, xyz)` of the fit's tracks and of the
+/// interleaved, each with its 3D point (`(residual sums, xyz)` of the fit's tracks and of the
 /// outlier tracks) and its reprojection RMS.
 fn point_results(
     t: &TrackSets<'_>,
-    fitted: (
-        &impl Fn(usize, usize) -> [f64; 2],
-        impl Fn(usize) -> Vector3<f64>,
-    ),
-    outliers: (
-        &impl Fn(usize, usize) -> [f64; 2],
-        impl Fn(usize) -> Vector3<f64>,
-    ),
+    fitted: (&ResidualSums, impl Fn(usize) -> Vector3<f64>),
+    outliers: (&ResidualSums, impl Fn(usize) -> Vector3<f64>),
 ) -> Vec<PointResult> {
     let result = |track: Id, x: Vector3<f64>, inlier: bool, (ss, n): (f64, usize)| PointResult {
         track,
@@ -2673,14 +2668,14 @@ fn point_results(
     let mut points: Vec<(usize, PointResult)> =
         Vec::with_capacity(t.used_tracks.len() + t.outlier_kept.len());
     for (p, &input_p) in t.used_tracks.iter().enumerate() {
-        let r = point_residuals(fitted.0, t.meas, p);
+        let r = fitted.0.points[p];
         points.push((
             input_p,
             result(t.fit.track_ids()[p].clone(), fitted.1(p), true, r),
         ));
     }
     for (k, &p) in t.outlier_kept.iter().enumerate() {
-        let r = point_residuals(outliers.0, t.outlier_meas, k);
+        let r = outliers.0.points[k];
         points.push((
             t.kept_tracks[p],
             result(t.kept.track_ids()[p].clone(), outliers.1(k), false, r),
@@ -2695,6 +2690,61 @@ fn metric_predictor(model: &MetricModel) -> impl Fn(usize, usize) -> [f64; 2] + 
     move |f, p| {
         let q = model.project(f, p);
         [q[0], q[1]]
+    }
+}
+
+/// The affine prediction `M̂Ŝ + t1ᵀ` of a fit, in the input's image coordinates
+/// (`x ← aspect · x + origin_x`, `y ← y + origin_y`), computed entry by entry: `O(F + N)`
+/// memory instead of a 2F×N matrix, three multiply-adds per entry.
+#[derive(Debug, Clone)]
+pub struct AffinePrediction {
+    /// `M̂`, 2F×3 (or 2F×k for a rank-k model).
+    pub m: Mat<f64>,
+    /// `Ŝ`, 3×N.
+    pub s: Mat<f64>,
+    /// `t`, 2F.
+    pub t: Vec<f64>,
+    /// Pixel aspect ratio applied to x, and the image origin added, after the product.
+    pub aspect: f64,
+    pub origin: [f64; 2],
+}
+
+impl Default for AffinePrediction {
+    fn default() -> Self {
+        Self {
+            m: Mat::zeros(0, 0),
+            s: Mat::zeros(0, 0),
+            t: Vec::new(),
+            aspect: 1.0,
+            origin: [0.0, 0.0],
+        }
+    }
+}
+
+impl AffinePrediction {
+    /// Rows (2F) and columns (N).
+    pub fn shape(&self) -> (usize, usize) {
+        (self.m.nrows(), self.s.ncols())
+    }
+
+    /// Entry `(r, p)`: row `r` (x of frame `r/2` when even, y when odd), track `p`.
+    #[inline]
+    pub fn value(&self, r: usize, p: usize) -> f64 {
+        let mut v = self.t[r];
+        for k in 0..self.m.ncols() {
+            v += self.m[(r, k)] * self.s[(k, p)];
+        }
+        if r.is_multiple_of(2) {
+            self.aspect * v + self.origin[0]
+        } else {
+            v + self.origin[1]
+        }
+    }
+
+    /// The whole 2F×N matrix.
+    pub fn to_mat(&self) -> Mat<f64> {
+        let (rows, cols) = self.shape();
+        Mat::from_fn(rows, cols, |r, p| self.value(r, p))
     }
 }
 
@@ -2809,9 +2859,14 @@ fn validate_config(c: &Config) -> Result<()> {
 /// Centering trick + rank-3 truncation for complete measurements.
 fn factorize_complete(meas: &Measurements, cfg: &TruncatedSvdConfig) -> Result<Affine> {
     let (rows, n) = (meas.w.nrows(), meas.w.ncols());
-    let t: Vec<f64> = (0..rows)
-        .map(|r| (0..n).map(|p| meas.w[(r, p)]).sum::<f64>() / n as f64)
-        .collect();
+    // Row means, summed column by column (each row's sum still in track order).
+    let mut t = vec![0.0; rows];
+    for p in 0..n {
+        for (tr, &w) in t.iter_mut().zip(meas.w.col(p).iter()) {
+            *tr += w;
+        }
+    }
+    t.iter_mut().for_each(|tr| *tr /= n as f64);
     let centered = Mat::from_fn(rows, n, |r, p| meas.w[(r, p)] - t[r]);
     let svd = svd::truncated_svd(centered.as_ref(), 4, cfg)?;
     // Rank < 3 up to rounding: σ3 at the level of σ1's rounding errors.
@@ -2824,10 +2879,10 @@ fn factorize_complete(meas: &Measurements, cfg: &TruncatedSvdConfig) -> Result<A
     }
     let m_hat = Mat::from_fn(rows, 3, |r, k| svd.u[(r, k)] * svd.s[k].sqrt());
     let s_hat = Mat::from_fn(3, n, |k, p| svd.v[(p, k)] * svd.s[k].sqrt());
-    let pred = Mat::from_fn(rows, n, |r, p| {
-        t[r] + (0..3).map(|k| m_hat[(r, k)] * s_hat[(k, p)]).sum::<f64>()
-    });
-    let rms = meas.rms(pred.as_ref());
+    // The prediction's RMS entry by entry (no 2F×N matrix).
+    let pred =
+        |r: usize, p: usize| t[r] + (0..3).map(|k| m_hat[(r, k)] * s_hat[(k, p)]).sum::<f64>();
+    let rms = meas.rms_of(|f, p| [pred(2 * f, p), pred(2 * f + 1, p)]);
     Ok(Affine {
         m_hat,
         s_hat,
@@ -3039,7 +3094,10 @@ fn restore_image_frame(
             .iter_mut()
             .for_each(|t| to_input(t.as_mut_slice()));
     }
-    for m in [&mut rec.affine_prediction, &mut rec.outlier_prediction] {
+    let a = &mut rec.affine_prediction;
+    a.origin = [aspect * a.origin[0] + origin[0], a.origin[1] + origin[1]];
+    a.aspect *= aspect;
+    for m in [&mut rec.outlier_prediction] {
         for j in 0..m.ncols() {
             for r in (0..m.nrows()).step_by(2) {
                 m[(r, j)] = aspect * m[(r, j)] + origin[0];
@@ -3365,7 +3423,7 @@ fn sparse_reconstruction(
         }),
         model,
         affine_structure,
-        affine_prediction: Mat::zeros(0, 0),
+        affine_prediction: AffinePrediction::default(),
         outlier_prediction: Mat::zeros(0, 0),
         outlier_model,
         kept_frames: kept_frames.clone(),
