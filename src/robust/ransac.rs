@@ -100,6 +100,13 @@ pub trait Estimator {
         (0..n).map(|i| self.residual(model, i)).collect()
     }
 
+    /// Residuals of the items `items` (`residual` of each, in that order). Override to
+    /// compute them in parallel; the result must not depend on the thread count. The
+    /// bail-out scoring asks for a block of items at a time ([`SCORE_BLOCK`]).
+    fn residuals_of(&self, model: &Self::Model, items: &[usize]) -> Vec<Option<f64>> {
+        items.iter().map(|&i| self.residual(model, i)).collect()
+    }
+
     /// Local optimization: a (non-minimal) fit to the given inliers, starting from `model`.
     /// `None` when the inliers do not determine a model.
     fn refit(&self, model: &Self::Model, inliers: &[usize]) -> Option<Self::Model>;
@@ -365,6 +372,30 @@ fn wilson(p: f64, j: f64, z: f64) -> (f64, f64) {
 /// First item count at which the bail-out tests are applied; later at doubling counts.
 const BAIL_OUT_FIRST: usize = 32;
 
+/// Items whose residuals the bail-out scoring computes at once ([`Estimator::residuals_of`],
+/// which an estimator may spread over threads): blocks end at the bail-out tests' counts
+/// and are at most this long. The items are still judged one by one in order, so the
+/// outcome is that of scoring one item at a time; a hypothesis abandoned inside a block
+/// wastes at most the rest of the block.
+pub const SCORE_BLOCK: usize = 256;
+
+/// Ends of the scoring blocks over `n` items: the bail-out counts 32, 64, 128, … and every
+/// [`SCORE_BLOCK`] items in between, then `n`.
+fn block_ends(n: usize) -> impl Iterator<Item = usize> {
+    let mut end = 0;
+    let mut check = BAIL_OUT_FIRST;
+    std::iter::from_fn(move || {
+        if end >= n {
+            return None;
+        }
+        end = (end + SCORE_BLOCK).min(check).min(n);
+        if end == check {
+            check *= 2;
+        }
+        Some(end)
+    })
+}
+
 /// MSAC scoring of `model` over the items in `order` (a permutation of `0..n`) that gives
 /// up (returns `None`) as soon as the hypothesis can neither beat the cost `bound` nor the
 /// scored-inlier ratio `ratio_bound`.
@@ -397,8 +428,16 @@ fn score_bounded<E: Estimator>(
     let mut n_scored = 0;
     let mut scored_out = 0usize;
     let mut check = BAIL_OUT_FIRST;
+    let mut block: Vec<Option<f64>> = Vec::new();
+    let mut ends = block_ends(n);
+    let mut block_start = 0;
     for (j, &i) in order.iter().enumerate() {
-        let r = est.residual(&model, i);
+        if j == block_start + block.len() {
+            block_start = j;
+            let end = ends.next().unwrap_or(n);
+            block = est.residuals_of(&model, &order[j..end]);
+        }
+        let r = block[j - block_start];
         if r.is_some() {
             n_scored += 1;
         }
@@ -462,8 +501,16 @@ fn residuals_bounded<E: Estimator>(
     let mut out = Vec::with_capacity(m);
     let mut above = 0;
     let mut check = BAIL_OUT_FIRST;
-    for (j, &i) in items.iter().enumerate() {
-        let r = est.residual(model, i);
+    let mut block: Vec<Option<f64>> = Vec::new();
+    let mut ends = block_ends(m);
+    let mut block_start = 0;
+    for j in 0..m {
+        if j == block_start + block.len() {
+            block_start = j;
+            let end = ends.next().unwrap_or(m);
+            block = est.residuals_of(model, &items[j..end]);
+        }
+        let r = block[j - block_start];
         if r.is_none_or(|r| !(r < bound)) {
             above += 1;
             if above > m - k {
@@ -954,6 +1001,17 @@ mod tests {
                 assert!(s > 0.03 && s < 0.09, "σ = {s}");
             }
         }
+    }
+
+    /// Scoring blocks end at every bail-out count and are at most `SCORE_BLOCK` long.
+    #[test]
+    fn scoring_blocks_end_at_the_bail_out_counts() {
+        let ends = |n| block_ends(n).collect::<Vec<_>>();
+        assert_eq!(ends(0), Vec::<usize>::new());
+        assert_eq!(ends(10), vec![10]);
+        assert_eq!(ends(32), vec![32]);
+        assert_eq!(ends(1000), vec![32, 64, 128, 256, 512, 768, 1000]);
+        assert_eq!(ends(1100), vec![32, 64, 128, 256, 512, 768, 1024, 1100]);
     }
 
     #[test]

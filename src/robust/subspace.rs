@@ -849,6 +849,20 @@ impl Estimator for TrackSubspace {
         self.track_fit(model, item).map(|t| t.rms)
     }
 
+    /// The given tracks' residuals, in parallel over tracks when their frames are many
+    /// enough to pay for it (as [`Self::residuals`]).
+    fn residuals_of(&self, model: &AffineSubspace, items: &[usize]) -> Vec<Option<f64>> {
+        let frames: usize = items.iter().map(|&p| self.frames_of[p].len()).sum();
+        if frames < 4096 {
+            return items.iter().map(|&p| self.residual(model, p)).collect();
+        }
+        items
+            .par_iter()
+            .with_min_len(4)
+            .map(|&p| self.track_fit(model, p).map(|t| t.rms))
+            .collect()
+    }
+
     /// All tracks' residuals, in parallel over tracks (rayon; each residual is independent
     /// of the others, so the result does not depend on the thread count).
     fn residuals(&self, model: &AffineSubspace, n: usize) -> Vec<Option<f64>> {
