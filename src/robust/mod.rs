@@ -503,21 +503,41 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             // each distance scaled by 1/sqrt(1 − 3/(2k)) for the 3 coordinates fitted from k
             // frames; σ_e = median / sqrt(2 ln 2).
             let scale_of = |fits: &[Option<[f64; 3]>]| -> Option<f64> {
-                let mut d: Vec<f64> = Vec::new();
-                for &p in &inl {
-                    let Some(s) = &fits[p] else { continue };
-                    let k = est
-                        .frames_of(p)
+                // Gathered on all cores into one buffer of the exact size (each track's
+                // distances in its own slice); the median does not depend on the order.
+                let defined = |p: usize| {
+                    est.frames_of(p)
                         .iter()
                         .filter(|&&f| model.defined[f as usize])
-                        .count() as f64;
-                    let lev = (1.0 - 3.0 / (2.0 * k)).max(0.1).sqrt();
-                    for &fr in est.frames_of(p) {
-                        if model.defined[fr as usize] {
-                            d.push(est.dist2(&model, p, fr as usize, s).sqrt() / lev);
-                        }
-                    }
+                        .count()
+                };
+                let counts: Vec<usize> = inl
+                    .iter()
+                    .map(|&p| if fits[p].is_some() { defined(p) } else { 0 })
+                    .collect();
+                let mut d = vec![0.0; counts.iter().sum()];
+                let mut slices: Vec<&mut [f64]> = Vec::with_capacity(inl.len());
+                let mut rest = &mut d[..];
+                for &c in &counts {
+                    let (head, tail) = rest.split_at_mut(c);
+                    slices.push(head);
+                    rest = tail;
                 }
+                slices
+                    .into_par_iter()
+                    .zip(inl.par_iter())
+                    .with_min_len(64)
+                    .for_each(|(out, &p)| {
+                        let Some(s) = &fits[p] else { return };
+                        let lev = (1.0 - 3.0 / (2.0 * out.len() as f64)).max(0.1).sqrt();
+                        let frames = est
+                            .frames_of(p)
+                            .iter()
+                            .filter(|&&fr| model.defined[fr as usize]);
+                        for (o, &fr) in out.iter_mut().zip(frames) {
+                            *o = est.dist2(&model, p, fr as usize, s).sqrt() / lev;
+                        }
+                    });
                 (!d.is_empty())
                     .then(|| (median_in_place(&mut d) / 1.177_410_022_515_474_8).max(floor))
             };

@@ -688,8 +688,30 @@ impl TrackSubspace {
                         _ => f64::NAN,
                     }));
                 });
+            // Gathered on all cores into one buffer of the exact size (each track's scored
+            // entries in its own slice); the median does not depend on the order.
+            let counts: Vec<usize> = d2s
+                .par_iter()
+                .map(|d2| d2.iter().filter(|x| !x.is_nan()).count())
+                .collect();
             d2all.clear();
-            d2all.extend(d2s.iter().flatten().copied().filter(|x| !x.is_nan()));
+            d2all.resize(counts.iter().sum(), 0.0);
+            let mut slices: Vec<&mut [f64]> = Vec::with_capacity(counts.len());
+            let mut rest = &mut d2all[..];
+            for &c in &counts {
+                let (head, tail) = rest.split_at_mut(c);
+                slices.push(head);
+                rest = tail;
+            }
+            slices
+                .into_par_iter()
+                .zip(d2s.par_iter())
+                .with_min_len(ALS_CHUNK)
+                .for_each(|(out, d2)| {
+                    for (o, &x) in out.iter_mut().zip(d2.iter().filter(|x| !x.is_nan())) {
+                        *o = x;
+                    }
+                });
             if d2all.is_empty() {
                 return None;
             }
@@ -705,27 +727,51 @@ impl TrackSubspace {
             // their entries, so when fewer than half of a frame's entries pass, the cut is
             // not applied there: the next M-step fits all of them (least squares, pulled
             // only by the frame's few gross entries), and the cut applies again from it.
-            let (mut scored, mut within) = (vec![0usize; f], vec![0usize; f]);
-            for (j, &p) in inliers.iter().enumerate() {
-                for (&fr, &d2) in self.frames_of[p].iter().zip(&d2s[j]) {
-                    if !d2.is_nan() {
-                        scored[fr as usize] += 1;
-                        within[fr as usize] += usize::from(d2 <= cut2 || cut2 == 0.0);
-                    }
-                }
-            }
-            let cut_frame: Vec<bool> = (0..f).map(|fr| 2 * within[fr] >= scored[fr]).collect();
-            let mut cost = 0.0;
-            for (j, &p) in inliers.iter().enumerate() {
-                for ((k, &d2), &fr) in keep[j].iter_mut().zip(&d2s[j]).zip(&self.frames_of[p]) {
-                    if !d2.is_nan() {
-                        *k = d2 <= cut2 || cut2 == 0.0 || !cut_frame[fr as usize];
-                        if *k {
-                            cost += d2;
+            // (Counted over chunks of tracks on all cores; integer counts, exact.)
+            let (scored, within) = inliers
+                .par_chunks(ALS_CHUNK)
+                .zip(d2s.par_chunks(ALS_CHUNK))
+                .map(|(ps, ds)| {
+                    let (mut scored, mut within) = (vec![0usize; f], vec![0usize; f]);
+                    for (&p, d2s) in ps.iter().zip(ds) {
+                        for (&fr, &d2) in self.frames_of[p].iter().zip(d2s) {
+                            if !d2.is_nan() {
+                                scored[fr as usize] += 1;
+                                within[fr as usize] += usize::from(d2 <= cut2 || cut2 == 0.0);
+                            }
                         }
                     }
-                }
-            }
+                    (scored, within)
+                })
+                .reduce(
+                    || (vec![0usize; f], vec![0usize; f]),
+                    |(mut s, mut w), (s2, w2)| {
+                        s.iter_mut().zip(s2).for_each(|(a, b)| *a += b);
+                        w.iter_mut().zip(w2).for_each(|(a, b)| *a += b);
+                        (s, w)
+                    },
+                );
+            let cut_frame: Vec<bool> = (0..f).map(|fr| 2 * within[fr] >= scored[fr]).collect();
+            // Per track (on all cores) the new weights and the kept entries' cost, the
+            // tracks' costs then added in track order (independent of the thread count).
+            let track_cost: Vec<f64> = keep
+                .par_iter_mut()
+                .zip(d2s.par_iter().zip(inliers.par_iter()))
+                .with_min_len(ALS_CHUNK)
+                .map(|(kp, (d2s, &p))| {
+                    let mut c = 0.0;
+                    for ((k, &d2), &fr) in kp.iter_mut().zip(d2s).zip(&self.frames_of[p]) {
+                        if !d2.is_nan() {
+                            *k = d2 <= cut2 || cut2 == 0.0 || !cut_frame[fr as usize];
+                            if *k {
+                                c += d2;
+                            }
+                        }
+                    }
+                    c
+                })
+                .collect();
+            let cost: f64 = track_cost.iter().sum();
             if sweep > 1 && (last_cost - cost).abs() <= ALS_TOLERANCE * last_cost.max(1e-300) {
                 break;
             }
