@@ -71,6 +71,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod ransac;
+pub mod select;
 pub mod subspace;
 
 use rand::Rng;
@@ -503,43 +504,25 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             // each distance scaled by 1/sqrt(1 − 3/(2k)) for the 3 coordinates fitted from k
             // frames; σ_e = median / sqrt(2 ln 2).
             let scale_of = |fits: &[Option<[f64; 3]>]| -> Option<f64> {
-                // Gathered on all cores into one buffer of the exact size (each track's
-                // distances in its own slice); the median does not depend on the order.
-                let defined = |p: usize| {
-                    est.frames_of(p)
-                        .iter()
-                        .filter(|&&f| model.defined[f as usize])
-                        .count()
-                };
-                let counts: Vec<usize> = inl
-                    .iter()
-                    .map(|&p| if fits[p].is_some() { defined(p) } else { 0 })
-                    .collect();
-                let mut d = vec![0.0; counts.iter().sum()];
-                let mut slices: Vec<&mut [f64]> = Vec::with_capacity(inl.len());
-                let mut rest = &mut d[..];
-                for &c in &counts {
-                    let (head, tail) = rest.split_at_mut(c);
-                    slices.push(head);
-                    rest = tail;
-                }
-                slices
-                    .into_par_iter()
-                    .zip(inl.par_iter())
-                    .with_min_len(64)
-                    .for_each(|(out, &p)| {
-                        let Some(s) = &fits[p] else { return };
-                        let lev = (1.0 - 3.0 / (2.0 * out.len() as f64)).max(0.1).sqrt();
-                        let frames = est
-                            .frames_of(p)
+                // The median over every entry, on all cores, without a buffer of them all
+                // ([`select::median_of_parts`]; exact).
+                let distances = |j: usize| {
+                    let p = inl[j];
+                    let model = &model;
+                    let est = &est;
+                    let defined = move || {
+                        est.frames_of(p)
                             .iter()
-                            .filter(|&&fr| model.defined[fr as usize]);
-                        for (o, &fr) in out.iter_mut().zip(frames) {
-                            *o = est.dist2(&model, p, fr as usize, s).sqrt() / lev;
-                        }
-                    });
-                (!d.is_empty())
-                    .then(|| (median_in_place(&mut d) / 1.177_410_022_515_474_8).max(floor))
+                            .filter(move |&&fr| model.defined[fr as usize])
+                    };
+                    fits[p].into_iter().flat_map(move |s| {
+                        let k = defined().count() as f64;
+                        let lev = (1.0 - 3.0 / (2.0 * k)).max(0.1).sqrt();
+                        defined().map(move |&fr| est.dist2(model, p, fr as usize, &s).sqrt() / lev)
+                    })
+                };
+                let med = select::median_of_parts(inl.len(), distances);
+                (!med.is_nan()).then(|| (med / 1.177_410_022_515_474_8).max(floor))
             };
             // Only the inlier tracks' fits enter the scale.
             let is_inl = {
@@ -1195,22 +1178,6 @@ fn refit_shift_small(
 
 /// Median (mean of the two middle values for an even count, as [`crate::eval::median`])
 /// by selection, O(len); reorders `v`. NaN for an empty slice.
-fn median_in_place(v: &mut [f64]) -> f64 {
-    let len = v.len();
-    if len == 0 {
-        return f64::NAN;
-    }
-    let mid = len / 2;
-    let (lo, m, _) = v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-    let m = *m;
-    if len % 2 == 1 {
-        m
-    } else {
-        let below = lo.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        0.5 * (below + m)
-    }
-}
-
 /// RMS distance of the observations to their frame's centroid (per coordinate), pixels.
 /// Two passes of [`Measurements::for_each_observed`], `O(F·N)`.
 fn observation_spread(meas: &Measurements) -> f64 {

@@ -591,7 +591,6 @@ impl TrackSubspace {
         // The weights used by the last sweep's S- and M-steps.
         let mut used: Vec<Vec<bool>> = Vec::new();
         let mut d2s: Vec<Vec<f64>> = vec![Vec::new(); inliers.len()];
-        let mut d2all: Vec<f64> = Vec::new();
         let mut last_cost = f64::INFINITY;
         let chi2_cut = super::chi2_quantile(2.0, 0.999);
         for sweep in 0..sweeps.max(1) {
@@ -688,35 +687,13 @@ impl TrackSubspace {
                         _ => f64::NAN,
                     }));
                 });
-            // Gathered on all cores into one buffer of the exact size (each track's scored
-            // entries in its own slice); the median does not depend on the order.
-            let counts: Vec<usize> = d2s
-                .par_iter()
-                .map(|d2| d2.iter().filter(|x| !x.is_nan()).count())
-                .collect();
-            d2all.clear();
-            d2all.resize(counts.iter().sum(), 0.0);
-            let mut slices: Vec<&mut [f64]> = Vec::with_capacity(counts.len());
-            let mut rest = &mut d2all[..];
-            for &c in &counts {
-                let (head, tail) = rest.split_at_mut(c);
-                slices.push(head);
-                rest = tail;
-            }
-            slices
-                .into_par_iter()
-                .zip(d2s.par_iter())
-                .with_min_len(ALS_CHUNK)
-                .for_each(|(out, d2)| {
-                    for (o, &x) in out.iter_mut().zip(d2.iter().filter(|x| !x.is_nan())) {
-                        *o = x;
-                    }
-                });
-            if d2all.is_empty() {
-                return None;
-            }
-            let mid = d2all.len() / 2;
-            let med = *d2all.select_nth_unstable_by(mid, |x, y| x.total_cmp(y)).1;
+            // The median scored distance, on all cores, without a buffer of them all
+            // ([`super::select::order_statistics`]; exact).
+            let ([med, _], _) = super::select::order_statistics(
+                d2s.len(),
+                |j| d2s[j].iter().copied().filter(|x| !x.is_nan()),
+                |n| (n / 2, n / 2),
+            )?;
             let sigma_e = med.sqrt() / RAYLEIGH_MEDIAN;
             let cut2 = chi2_cut * sigma_e * sigma_e;
             // Per frame: scored entries, and those within the cut. A frame whose camera
