@@ -2301,9 +2301,12 @@ const PRETEST_PER_FRAME: usize = 12;
 /// gives a dense system). `O(F N)`.
 fn projective_iteration_flops(meas: &Measurements) -> f64 {
     let (nf, np) = (meas.n_frames(), meas.n_points());
-    let assembly: f64 = (0..np)
-        .map(|p| {
-            let k = (0..nf).filter(|&f| meas.is_visible(f, p)).count() as f64;
+    let mut seen = vec![0usize; np];
+    meas.for_each_observed(|_, p| seen[p] += 1);
+    let assembly: f64 = seen
+        .iter()
+        .map(|&k| {
+            let k = k as f64;
             k * k * 121.0
         })
         .sum();

@@ -432,19 +432,26 @@ pub(crate) fn dlt_views<'a>(views: impl Iterator<Item = (&'a [f64], [f64; 2])>) 
 /// every frame seeing ≥ 6 tracks (11 parameters, 2 equations per track), every track seen
 /// in ≥ 2 frames, and at least 7 tracks in all (a fundamental matrix needs 7).
 pub fn check_observations(meas: &Measurements) -> Result<()> {
-    if let Some((f, p)) = meas
-        .observed_pairs()
-        .find(|&(f, p)| !(meas.w[(2 * f, p)].is_finite() && meas.w[(2 * f + 1, p)].is_finite()))
-    {
+    // One tiled walk (no graph of the observations is built): the first non-finite value in
+    // frame-major order, and the counts per frame and per track.
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    let (mut per_frame, mut per_track) = (vec![0usize; nf], vec![0usize; np]);
+    let mut bad: Option<(usize, usize)> = None;
+    meas.for_each_observed(|f, p| {
+        if !(meas.w[(2 * f, p)].is_finite() && meas.w[(2 * f + 1, p)].is_finite())
+            && bad.is_none_or(|b| (f, p) < b)
+        {
+            bad = Some((f, p));
+        }
+        per_frame[f] += 1;
+        per_track[p] += 1;
+    });
+    if let Some((f, p)) = bad {
         return Err(Error::Degenerate(format!(
             "observed value of track {p} in frame {f} is not finite"
         )));
     }
-    let unit = Normalization {
-        centre: [0.0, 0.0],
-        scale: 1.0,
-    };
-    check_graph(&graph(meas, &unit))
+    check_counts(&per_frame, &per_track)
 }
 
 /// Projective reconstruction of `meas` from an affine factorization of the same
@@ -730,23 +737,29 @@ pub(crate) fn observation_graph(
 
 /// The counts of [`check_observations`] on a graph.
 pub(crate) fn check_graph(g: &Graph) -> Result<()> {
-    if g.n_cams < 2 {
-        return Err(Error::TooFew {
-            what: "frames for a projective reconstruction",
-            needed: 2,
-            have: g.n_cams,
-        });
-    }
-    if g.n_pts < 7 {
-        return Err(Error::TooFew {
-            what: "tracks for a projective reconstruction",
-            needed: 7,
-            have: g.n_pts,
-        });
-    }
     let mut per_frame = vec![0usize; g.n_cams];
     for &c in &g.cam {
         per_frame[c] += 1;
+    }
+    let per_track: Vec<usize> = (0..g.n_pts).map(|p| g.track(p).len()).collect();
+    check_counts(&per_frame, &per_track)
+}
+
+/// [`check_graph`] from the number of observations of each frame and of each track.
+fn check_counts(per_frame: &[usize], per_track: &[usize]) -> Result<()> {
+    if per_frame.len() < 2 {
+        return Err(Error::TooFew {
+            what: "frames for a projective reconstruction",
+            needed: 2,
+            have: per_frame.len(),
+        });
+    }
+    if per_track.len() < 7 {
+        return Err(Error::TooFew {
+            what: "tracks for a projective reconstruction",
+            needed: 7,
+            have: per_track.len(),
+        });
     }
     if let Some(&have) = per_frame.iter().min()
         && have < 6
@@ -757,7 +770,7 @@ pub(crate) fn check_graph(g: &Graph) -> Result<()> {
             have,
         });
     }
-    if let Some(have) = (0..g.n_pts).map(|p| g.track(p).len()).min()
+    if let Some(&have) = per_track.iter().min()
         && have < 2
     {
         return Err(Error::TooFew {

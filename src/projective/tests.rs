@@ -98,3 +98,57 @@ fn noise_free_missing_scene_is_fitted_exactly() {
     eprintln!("{:?}", fit.stages);
     assert!(fit.rms_px < 1e-9, "rms {}", fit.rms_px);
 }
+
+/// `check_observations` counts per frame and per track in one walk: the first non-finite
+/// value in frame-major order is named, then too few tracks in a frame or frames of a track.
+#[test]
+fn check_observations_names_the_first_bad_value_and_the_counts() {
+    let (nf, np) = (4, 9);
+    let w = Mat::from_fn(2 * nf, np, |r, p| (r * 13 + p * 7) as f64);
+    let ok = Measurements::complete(w.clone());
+    assert!(check_observations(&ok).is_ok());
+    let mut bad = w.clone();
+    bad[(2 * 2 + 1, 1)] = f64::NAN; // frame 2, track 1
+    bad[(2 * 3, 0)] = f64::INFINITY; // frame 3, track 0: later in frame-major order
+    bad[(2 * 2, 5)] = f64::NAN; // frame 2, track 5
+    let e = check_observations(&Measurements::complete(bad)).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("observed value of track 1 in frame 2 is not finite"),
+        "{e}"
+    );
+    // Frame 1 sees 5 tracks.
+    let mut vis = vec![true; nf * np];
+    for p in 5..np {
+        vis[np + p] = false;
+    }
+    let e = check_observations(&Measurements::new(w.clone(), vis)).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            Error::TooFew {
+                needed: 6,
+                have: 5,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    // Track 8 is seen in frame 0 only.
+    let mut vis = vec![true; nf * np];
+    for f in 1..nf {
+        vis[f * np + 8] = false;
+    }
+    let e = check_observations(&Measurements::new(w, vis)).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            Error::TooFew {
+                needed: 2,
+                have: 1,
+                ..
+            }
+        ),
+        "{e}"
+    );
+}
