@@ -7,9 +7,8 @@
 
 use faer::Mat;
 
-/// Tracks per block of [`Measurements::for_each_observed`] and
-/// [`Measurements::sum_observed`]: 64 mask bytes (a cache line) per frame, and 64 columns
-/// of `W` (1 MB at 1000 frames, within the TLB's reach) per block.
+/// Tracks per block of [`Measurements::sum_observed`] (its unit of parallel work and of
+/// its partial sums): 64 mask bytes, a cache line, per frame.
 pub const TILE_TRACKS: usize = 64;
 
 /// Dense 2F×N measurements with an F×N visibility mask.
@@ -101,31 +100,29 @@ impl Measurements {
             .map(move |(i, _)| (i / n, i % n))
     }
 
-    /// Calls `visit(f, p)` for every observed pair, track by track (each track's frames in
-    /// order) in blocks of [`TILE_TRACKS`] tracks. Every frame's pairs are visited in
-    /// increasing track order and every track's in increasing frame order, as by
-    /// [`Self::observed_pairs`] and by a walk track by track, so sums kept per frame or per
-    /// track come out bit for bit the same. Unlike the frame-by-frame walk, which strides
-    /// `16·F` bytes in `W` (column-major) per entry, it reads `W` in order; the mask
-    /// (row-major) is read across a block's tracks, whose cache lines (one per frame)
-    /// stay in cache for the block. `O(F·N)`.
+    /// Calls `visit(f, p)` for every observed pair, track by track, each track's frames in
+    /// order. Every frame's pairs are then visited in increasing track order and every
+    /// track's in increasing frame order, as by [`Self::observed_pairs`], so sums kept per
+    /// frame or per track come out bit for bit the same. Unlike that frame-by-frame walk,
+    /// which strides `16·F` bytes in `W` (column-major) per entry (a TLB miss each at 1000
+    /// frames), it reads `W` in order; the mask (row-major) is read one byte per frame,
+    /// and consecutive tracks share its cache lines (`F` lines, in cache across 64
+    /// tracks). `O(F·N)`.
     pub fn for_each_observed(&self, mut visit: impl FnMut(usize, usize)) {
         let (nf, n) = (self.n_frames(), self.n_points());
-        for p0 in (0..n).step_by(TILE_TRACKS) {
-            for p in p0..(p0 + TILE_TRACKS).min(n) {
-                for f in 0..nf {
-                    if self.visible[f * n + p] {
-                        visit(f, p);
-                    }
+        for p in 0..n {
+            for f in 0..nf {
+                if self.visible[f * n + p] {
+                    visit(f, p);
                 }
             }
         }
     }
 
-    /// `Σ term(f, p)` over the observed pairs and their number, the blocks of
-    /// [`Self::for_each_observed`] summed on all cores; each block's sum is taken in that
-    /// walk's order and the blocks' sums are added in block order, so the result does not
-    /// depend on the number of threads. `O(F·N / threads)`.
+    /// `Σ term(f, p)` over the observed pairs and their number, in the order of
+    /// [`Self::for_each_observed`] within blocks of [`TILE_TRACKS`] tracks summed on all
+    /// cores; the blocks' sums are added in block order, so the result does not depend on
+    /// the number of threads. `O(F·N / threads)`.
     pub fn sum_observed(&self, term: impl Fn(usize, usize) -> f64 + Sync) -> (f64, usize) {
         use rayon::prelude::*;
         let (nf, n) = (self.n_frames(), self.n_points());
