@@ -3100,12 +3100,11 @@ fn restore_image_frame(
     let a = &mut rec.affine_prediction;
     a.origin = [aspect * a.origin[0] + origin[0], a.origin[1] + origin[1]];
     a.aspect *= aspect;
-    for m in [&mut rec.outlier_prediction] {
-        for j in 0..m.ncols() {
-            for r in (0..m.nrows()).step_by(2) {
-                m[(r, j)] = aspect * m[(r, j)] + origin[0];
-                m[(r + 1, j)] += origin[1];
-            }
+    let m = &mut rec.outlier_prediction;
+    for j in 0..m.ncols() {
+        for r in (0..m.nrows()).step_by(2) {
+            m[(r, j)] = aspect * m[(r, j)] + origin[0];
+            m[(r + 1, j)] += origin[1];
         }
     }
     if let Some(pr) = &mut rec.projective {

@@ -882,7 +882,7 @@ impl Estimator for TrackSubspace {
         items
             .par_iter()
             .with_min_len(4)
-            .map(|&p| self.track_fit(model, p).map(|t| t.rms))
+            .map(|&p| self.residual(model, p))
             .collect()
     }
 
