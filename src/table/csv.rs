@@ -142,15 +142,35 @@ pub fn parse_reader<R: Read>(reader: R, path: &Path) -> Result<(TrackTable, Vec<
 
 /// [`parse_reader`] with blocks of `pieces` pieces of about `piece_bytes` each.
 fn parse_in_pieces<R: Read>(
-    mut reader: R,
+    reader: R,
     path: &Path,
     piece_bytes: usize,
     pieces: usize,
 ) -> Result<(TrackTable, Vec<String>)> {
+    let mut rows = Rows::default();
+    let warnings = read_in_pieces(reader, path, piece_bytes, pieces, &mut |part| {
+        rows.append(part);
+        Ok(())
+    })?;
+    rows.finish(path, warnings)
+}
+
+/// Records the streaming fallback reader hands on at a time (bounded memory).
+const FALLBACK_RECORDS: usize = 1 << 20;
+
+/// The reading loop of [`parse_in_pieces`] and [`scan_reader`]: hands the parsed rows to
+/// `take` a part at a time, in file order, each part with its own id tables (merge them in
+/// the order received); returns the header's warnings.
+fn read_in_pieces<R: Read>(
+    mut reader: R,
+    path: &Path,
+    piece_bytes: usize,
+    pieces: usize,
+    take: &mut dyn FnMut(Rows) -> Result<()>,
+) -> Result<Vec<String>> {
     let block = piece_bytes * pieces;
     let mut data = Vec::new();
     let mut eof = fill(&mut reader, &mut data, block).map_err(|e| Error::io(path, e))?;
-    let mut rows = Rows::default();
     // (A blank first line goes to the streaming reader, which skips it as before.)
     let header_end = memchr::memchr(b'\n', &data)
         .filter(|&nl| plain(&data[..=nl]) && !data[..nl].trim_ascii().is_empty());
@@ -158,8 +178,8 @@ fn parse_in_pieces<R: Read>(
         // A quoted or unusual header: one streaming reader for the whole file.
         let mut rdr = csv_reader(std::io::Cursor::new(data).chain(reader), true);
         let (col, warnings) = header(&mut rdr, path)?;
-        rows.read_all(&mut rdr, &col, 0, None, path)?;
-        return rows.finish(path, warnings);
+        read_all_in_parts(&mut rdr, &col, 0, path, take)?;
+        return Ok(warnings);
     };
     let (col, warnings) = header(&mut csv_reader(&data[..nl], true), path)?;
     data.drain(..=nl);
@@ -177,7 +197,7 @@ fn parse_in_pieces<R: Read>(
         let Some(cut) = cut.filter(|&c| plain(&data[..c])) else {
             // No line end in a whole block, or quotes: stream the rest with one reader.
             let mut rdr = csv_reader(std::io::Cursor::new(data).chain(reader), false);
-            rows.read_all(&mut rdr, &col, line - 1, None, path)?;
+            read_all_in_parts(&mut rdr, &col, line - 1, path, take)?;
             break;
         };
         let parts = split_at_lines(&data[..cut], pieces);
@@ -197,19 +217,121 @@ fn parse_in_pieces<R: Read>(
                     start - 1,
                     Some(piece),
                     path,
+                    usize::MAX,
                 )?;
                 Ok(part)
             })
             .collect();
         for part in parsed {
-            rows.append(part?);
+            take(part?)?;
         }
         data.drain(..cut);
         if eof && data.is_empty() {
             break;
         }
     }
-    rows.finish(path, warnings)
+    Ok(warnings)
+}
+
+/// Every record of `rdr`, handed to `take` [`FALLBACK_RECORDS`] at a time.
+fn read_all_in_parts<R: Read>(
+    rdr: &mut ::csv::Reader<R>,
+    col: &[usize; 4],
+    line_offset: usize,
+    path: &Path,
+    take: &mut dyn FnMut(Rows) -> Result<()>,
+) -> Result<()> {
+    loop {
+        let mut part = Rows::default();
+        let done = part.read_all(rdr, col, line_offset, None, path, FALLBACK_RECORDS)?;
+        take(part)?;
+        if done {
+            return Ok(());
+        }
+    }
+}
+
+/// One observation of a scanned CSV file ([`scan_reader`]): frame and track as indices into
+/// [`Scanned::frame_ids`] / [`Scanned::track_ids`] (order of first appearance in the file),
+/// and the line it is on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScannedObservation {
+    pub frame: u32,
+    pub track: u32,
+    pub x: f64,
+    pub y: f64,
+    pub line: u32,
+}
+
+/// What a scan of a CSV file found besides its observations.
+#[derive(Debug, Clone, Default)]
+pub struct Scanned {
+    /// Frame ids in order of first appearance (the index of [`ScannedObservation::frame`]).
+    pub frame_ids: Vec<Id>,
+    /// Track ids in order of first appearance.
+    pub track_ids: Vec<Id>,
+    /// For each frame (first-appearance index), its position in rank3's order (ascending
+    /// when all ids are integers, else first appearance), as [`parse_reader`] orders them.
+    pub frame_order: Vec<u32>,
+    /// The same for tracks.
+    pub track_order: Vec<u32>,
+    /// Observation rows read.
+    pub observations: usize,
+    pub warnings: Vec<String>,
+}
+
+/// Reads a CSV table without holding it: hands its observations to `visit` a block at a
+/// time (about `PIECE_BYTES` per thread), in file order, with ids numbered in order of first
+/// appearance — the same numbers on every scan of the same file. Memory: one block of
+/// text and its rows, plus the id tables. Errors name the file, line and field as
+/// [`parse_reader`]'s; a repeated (frame, track) pair is not detected here (that needs
+/// every pair: the caller's business). Used by the streaming factorization
+/// ([`crate::stream`]), which reads a file more than once.
+pub fn scan_reader<R: Read>(
+    reader: R,
+    path: &Path,
+    visit: &mut dyn FnMut(&[ScannedObservation]) -> Result<()>,
+) -> Result<Scanned> {
+    let threads = rayon::current_num_threads().max(1);
+    let (mut frames, mut tracks) = (Ids::default(), Ids::default());
+    let mut observations = 0;
+    let mut buf = Vec::new();
+    let warnings = read_in_pieces(reader, path, PIECE_BYTES, threads, &mut |part| {
+        let frame_map = frames.merge(part.frames);
+        let track_map = tracks.merge(part.tracks);
+        buf.clear();
+        buf.extend(
+            part.obs
+                .iter()
+                .zip(&part.lines)
+                .map(|(&(f, p, x, y), &line)| ScannedObservation {
+                    frame: frame_map[f as usize],
+                    track: track_map[p as usize],
+                    x,
+                    y,
+                    line,
+                }),
+        );
+        observations += buf.len();
+        visit(&buf)
+    })?;
+    if observations == 0 {
+        return Err(Error::EmptyTable {
+            path: Some(path.to_path_buf()),
+            reason: "no observation rows after the header".into(),
+        });
+    }
+    let (frame_ids, track_ids) = (frames.ids.clone(), tracks.ids.clone());
+    let (_, frame_order) = frames.finish();
+    let (_, track_order) = tracks.finish();
+    Ok(Scanned {
+        frame_ids,
+        track_ids,
+        frame_order,
+        track_order,
+        observations,
+        warnings,
+    })
 }
 
 /// A CSV reader with rank3's settings: flexible rows, the header's fields trimmed (a
@@ -321,7 +443,8 @@ struct Rows {
 }
 
 impl Rows {
-    /// Reads every record of `rdr` (columns `col`). Line numbers: the reader's, offset by
+    /// Reads the records of `rdr` (columns `col`), at most `limit`; true when the input
+    /// ended. Line numbers: the reader's, offset by
     /// `line_offset`; or, given the `text` the reader reads (a piece that starts at line
     /// `line_offset + 1`), counted up to the record's first byte — exact also after a
     /// CRLF, where the csv crate's count is one short (it numbers a record before consuming
@@ -333,14 +456,20 @@ impl Rows {
         line_offset: usize,
         text: Option<&[u8]>,
         path: &Path,
-    ) -> Result<()> {
+        limit: usize,
+    ) -> Result<bool> {
         let mut rec = ::csv::ByteRecord::new();
         // Line ends counted in `text[..counted]`.
         let (mut counted, mut ends) = (0, 0);
+        let mut records = 0;
         loop {
+            if records == limit {
+                return Ok(false);
+            }
+            records += 1;
             match rdr.read_byte_record(&mut rec) {
                 Ok(true) => {}
-                Ok(false) => return Ok(()),
+                Ok(false) => return Ok(true),
                 Err(e) => {
                     let line = e.position().map_or(0, |p| p.line() as usize);
                     return Err(Error::parse(path, line + line_offset, "row", e.to_string()));
