@@ -50,6 +50,7 @@ pub mod segment;
 pub mod settings;
 pub mod solver;
 pub mod sparse;
+pub mod stream;
 pub mod svd;
 pub mod synth;
 pub mod table;

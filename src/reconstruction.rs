@@ -1060,6 +1060,10 @@ pub struct Reconstruction {
     /// completed.txt) did not run; the perspective camera runs on the sparse path
     /// ([`crate::perspective::fit_observations`]).
     pub sparse: Option<crate::sparse::SparseReport>,
+    /// Present when the streaming factorization ran ([`crate::stream`], `reconstruct
+    /// --stream`): complete tracks read in passes, `W` never held whole. The RANSAC robust
+    /// pass, the refinement and the projective cameras did not run.
+    pub stream: Option<crate::stream::StreamReport>,
     /// Present when a textured surface was built ([`crate::mesh`]; `rank3 run`, or
     /// `reconstruct --images`): its triangulation, texture and timing report.
     pub mesh: Option<crate::mesh::MeshReport>,
@@ -1908,6 +1912,7 @@ fn assemble(
         aspect_ratio: 1.0,
         aspect_ratio_source: SQUARE_PIXELS.to_string(),
         sparse: None,
+        stream: None,
         model,
         affine_structure: affine.s_hat,
         affine_prediction,
@@ -3423,6 +3428,7 @@ fn sparse_reconstruction(
             skipped_windows: fit.skipped_windows,
             seconds,
         }),
+        stream: None,
         model,
         affine_structure,
         affine_prediction: AffinePrediction::default(),

@@ -217,6 +217,10 @@ pub struct ReconstructionFile {
     pub timings: Vec<TimingRecord>,
     /// The sparse pipeline's report (layout: `docs/formats.md`), kept as JSON.
     pub sparse: Option<serde_json::Value>,
+    /// The streaming factorization's report ([`crate::stream::StreamReport`]), kept as
+    /// JSON; absent in files written before it existed.
+    #[serde(default)]
+    pub stream: Option<serde_json::Value>,
     /// The textured mesh's report (layout: `docs/formats.md`), kept as JSON.
     pub mesh: Option<serde_json::Value>,
     /// Aspect ratio of the pixels, `f_x / f_y` (1 in files written before it existed).

@@ -127,8 +127,8 @@ pub use mesh::log_mesh;
 pub use objects::log_objects;
 pub use observer::{RecordingObserver, reconstruct_recorded, reconstruct_recorded_with};
 pub use reconstruction::{
-    log_error, log_measurement_matrix, log_reconstruction, log_reconstruction_with, log_visibility,
-    summary_markdown,
+    log_error, log_measurement_matrix, log_reconstruction, log_reconstruction_with, log_streamed,
+    log_visibility, summary_markdown,
 };
 pub use robust::log_robust;
 pub use sinks::{RecordingArgs, finish_opened};

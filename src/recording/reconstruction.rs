@@ -76,6 +76,23 @@ pub(super) fn log_result(
     refresh_layout(rec)
 }
 
+/// Logs a reconstruction made without a table in memory ([`crate::stream`], `reconstruct
+/// --stream`): the singular values and σ4/σ3, the affine and metric structure, the cameras,
+/// the upgrade and the summary. The input, W and the per-entry residuals need the table and
+/// are not logged.
+///
+/// Cost: O(F + N).
+pub fn log_streamed(rec: &RecordingStream, result: &Reconstruction) -> RecordingResult {
+    log_factorization(rec, result)?;
+    log_metric(rec, result)?;
+    at_stage(rec, "result");
+    rec.log(
+        paths::SUMMARY,
+        &TextDocument::from_markdown(summary_markdown(result)),
+    )?;
+    refresh_layout(rec)
+}
+
 pub(super) fn check_consistent(table: &TrackTable, r: &Reconstruction) -> RecordingResult {
     let (fk, nk) = (r.kept_frames.len(), r.kept_tracks.len());
     let bad = r.input_frame_ids.len() != table.n_frames()
