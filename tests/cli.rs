@@ -1187,3 +1187,82 @@ fn options_that_do_nothing_are_refused() {
     }
     assert!(!out.exists(), "a refused command wrote {}", out.display());
 }
+
+/// `--stream`: the complete tracks of a CSV read in passes (here 5 blocks of 10 tracks),
+/// the same reconstruction as one block, the usual files, `eval` reads them; the options
+/// it cannot honour are refused.
+#[test]
+fn stream_reads_a_csv_in_passes() {
+    let d = tmp("stream");
+    run_ok(bin().args(["synth", "--out"]).arg(&d).args([
+        "--frames",
+        "12",
+        "--points",
+        "50",
+        "--noise",
+        "0.5",
+        "--camera",
+        "scaled-orthographic",
+        "--seed",
+        "4",
+    ]));
+    let tracks = d.join("tracks.csv");
+    let json_of = |out: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join("reconstruction.json")).unwrap())
+            .unwrap()
+    };
+    // 2K: 2048 / (2F · 8 bytes) = 10 tracks per block.
+    let (one, many) = (d.join("one"), d.join("many"));
+    let log = run_ok(
+        bin()
+            .args(["reconstruct", "--stream"])
+            .arg(&tracks)
+            .arg("--out")
+            .arg(&one),
+    );
+    assert!(log.contains("1 pass(es) over the file"), "{log}");
+    run_ok(
+        bin()
+            .args(["reconstruct", "--stream", "--memory", "2K"])
+            .arg(&tracks)
+            .arg("--out")
+            .arg(&many),
+    );
+    let (a, b) = (json_of(&one), json_of(&many));
+    assert_eq!(b["stream"]["blocks"], 5);
+    // The counting pass, five Gram passes, one structure pass.
+    assert_eq!(b["stream"]["passes"], 7);
+    assert_eq!(a["camera_model"], "scaled-orthographic");
+    let (ra, rb) = (a["rms_px"].as_f64().unwrap(), b["rms_px"].as_f64().unwrap());
+    assert!((ra - rb).abs() < 1e-9 && ra < 0.6, "{ra} vs {rb}");
+    assert_eq!(b["points"].as_array().unwrap().len(), 50);
+    for f in ["completed.txt", "points.ply"] {
+        assert!(many.join(f).exists(), "{f}");
+    }
+    let scores = run_ok(
+        bin()
+            .arg("eval")
+            .arg(&many)
+            .arg("--reference")
+            .arg(d.join("truth.json")),
+    );
+    assert!(scores.contains("structure"), "{scores}");
+    // Refused: a camera it does not fit, a format it does not stream.
+    let err = run_err(
+        bin()
+            .args(["reconstruct", "--stream", "--camera", "perspective"])
+            .arg(&tracks)
+            .arg("--out")
+            .arg(d.join("p")),
+    );
+    assert!(err.contains("affine cameras"), "{err}");
+    std::fs::write(d.join("t.txt"), "1 2\n3 4\n").unwrap();
+    let err = run_err(
+        bin()
+            .args(["reconstruct", "--stream"])
+            .arg(d.join("t.txt"))
+            .arg("--out")
+            .arg(d.join("q")),
+    );
+    assert!(err.contains("long CSV format"), "{err}");
+}

@@ -128,3 +128,30 @@ pub fn parse_objects(s: &str) -> Result<rank3::segment::Objects, String> {
         _ => Err(format!("`{s}` is neither `auto` nor a count in 1..=1000")),
     }
 }
+
+/// A byte count: a number with an optional suffix K, M, G or T (powers of 1024), e.g.
+/// `512M`.
+pub fn parse_bytes(s: &str) -> Result<usize, String> {
+    let t = s.trim();
+    let (num, mult) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let m: u64 = match c.to_ascii_uppercase() {
+                'K' => 1 << 10,
+                'M' => 1 << 20,
+                'G' => 1 << 30,
+                'T' => 1 << 40,
+                _ => return Err(format!("`{s}`: the suffix must be K, M, G or T")),
+            };
+            (&t[..i], m)
+        }
+        _ => (t, 1),
+    };
+    let v: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a byte count (e.g. 512M, 2G)"))?;
+    if !(v.is_finite() && v >= 1.0) {
+        return Err(format!("`{s}`: at least one byte"));
+    }
+    Ok((v * mult as f64).min(usize::MAX as f64) as usize)
+}

@@ -51,6 +51,16 @@ pub struct ReconstructArgs {
     /// mesh_texture.png, mesh.glb) is built and points.ply gets colours. Not with --objects.
     #[arg(long, value_name = "DIR|VIDEO", conflicts_with = "objects")]
     pub images: Option<PathBuf>,
+    /// Complete tracks of a CSV table larger than memory: the streaming factorization
+    /// (docs/math.md §13) reads the file in passes and never holds W whole. Affine cameras
+    /// (orthographic or scaled orthographic; auto means the latter), a per-track test
+    /// instead of RANSAC, no refinement; tracks not seen in every frame are set aside.
+    #[arg(long, conflicts_with_all = ["x", "images", "objects", "threshold"])]
+    pub stream: bool,
+    /// With --stream: memory for the block of W held at once, bytes (suffix K, M or G,
+    /// e.g. 512M). Each pass over the file fills one block. Default 1G.
+    #[arg(long, value_name = "BYTES", requires = "stream", value_parser = super::args::parse_bytes)]
+    pub memory: Option<usize>,
     #[command(flatten)]
     pub opts: ReconstructOpts,
     #[cfg(feature = "rerun")]
@@ -278,6 +288,9 @@ pub fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         #[cfg(feature = "rerun")]
         &a.record,
     )?;
+    if a.stream {
+        return reconstruct_streamed(a);
+    }
     // The table is read before the recording opens (opening it replaces an existing .rrd,
     // which bad input must not destroy).
     let read_start = std::time::Instant::now();
@@ -366,6 +379,113 @@ pub fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         #[cfg(feature = "rerun")]
         recording.as_ref(),
     )
+}
+
+/// `--stream`: the streaming factorization of the complete tracks of a CSV file
+/// ([`rank3::stream`]), then the usual files and summary.
+fn reconstruct_streamed(a: &ReconstructArgs) -> Result<(), rank3::Error> {
+    let Some(path) = a.tracks.as_deref() else {
+        return Err(rank3::Error::InvalidConfig {
+            field: "--stream",
+            message: "give a CSV track table (not --x/--y)".into(),
+        });
+    };
+    if rank3::table::Format::from_path(path)? != rank3::table::Format::Csv {
+        return Err(rank3::Error::InvalidConfig {
+            field: "--stream",
+            message: format!(
+                "{}: the streaming factorization reads the long CSV format (frame,track,x,y)",
+                path.display()
+            ),
+        });
+    }
+    if a.opts.aspect_ratio.is_some_and(|r| r != 1.0) {
+        return Err(rank3::Error::InvalidConfig {
+            field: "--aspect-ratio",
+            message: "the streaming factorization works in square pixels: divide x by the \
+                      ratio in the file, or drop --stream"
+                .into(),
+        });
+    }
+    let cfg = rank3::stream::StreamConfig {
+        memory_budget_bytes: a.memory.unwrap_or(1 << 30),
+        camera: a.camera.into(),
+        metric: rank3::metric::MetricConfig {
+            force_sdp: a.opts.force_sdp,
+            ..Default::default()
+        },
+        robust: !a.opts.no_robust,
+        ..Default::default()
+    };
+    #[cfg(feature = "rerun")]
+    let recording = a.record.open(
+        "rank3",
+        rank3::recording::LayoutParts {
+            reconstruction: true,
+            ..Default::default()
+        },
+    )?;
+    let mut source = rank3::stream::CsvFile {
+        path: path.to_path_buf(),
+    };
+    let start = std::time::Instant::now();
+    #[cfg(feature = "rerun")]
+    let result = match recording.as_ref() {
+        Some(r) => {
+            let mut observer = rank3::recording::RecordingObserver::new(r);
+            let result = rank3::stream::factorize(&mut source, &cfg, &mut observer);
+            observer.flush();
+            if let Err(e) = &result {
+                rank3::recording::log_error(r, e)?;
+            }
+            result?
+        }
+        None => rank3::stream::factorize(&mut source, &cfg, &mut rank3::NoopObserver)?,
+    };
+    #[cfg(not(feature = "rerun"))]
+    let result = rank3::stream::factorize(&mut source, &cfg, &mut rank3::NoopObserver)?;
+    for w in &result.warnings {
+        warning!("{w}");
+    }
+    let report = &result.report;
+    info!(
+        "streamed {}: {} frames × {} tracks, {} observations; {} pass(es) over the file, \
+         {} block(s) of {} tracks, {:.2} s",
+        path.display(),
+        result.frame_ids.len(),
+        result.track_ids.len(),
+        result.observations,
+        report.passes,
+        report.blocks,
+        report.block_tracks,
+        start.elapsed().as_secs_f64()
+    );
+    let camera = match a.camera {
+        CameraArg::Orthographic => rank3::CameraModel::Orthographic,
+        _ => rank3::CameraModel::ScaledOrthographic,
+    };
+    let rec = result.into_reconstruction(camera);
+    #[cfg(feature = "rerun")]
+    if let Some(r) = recording.as_ref() {
+        rank3::recording::log_streamed(r, &rec)?;
+    }
+    rank3::output::remove_stale(&a.out, &rank3::output::RECONSTRUCTION_FILES)?;
+    let write_start = std::time::Instant::now();
+    rank3::output::write_all_with(
+        &rec,
+        &a.out,
+        rank3::output::PlyOptions {
+            colors: None,
+            inliers_only: a.opts.ply_inliers_only,
+        },
+    )?;
+    summary::print_summary(&rec, &a.out);
+    detail!(
+        "wrote {} in {:.2} s",
+        a.out.display(),
+        write_start.elapsed().as_secs_f64()
+    );
+    Ok(())
 }
 
 /// `--objects`: segmentation, one reconstruction per object, their files and recording.
