@@ -30,6 +30,7 @@ __all__ = [
     "Tracks",
     "Reconstruction",
     "reconstruct",
+    "reconstruct_stream",
     "track",
     "read_tracks",
     "write_tracks",
@@ -356,6 +357,43 @@ def reconstruct(
         None if rrd is None else os.fspath(rrd),
         progress,
     )
+    return Reconstruction(inner)
+
+
+def reconstruct_stream(
+    path: Union[str, os.PathLike],
+    *,
+    memory: Union[int, str] = "1G",
+    camera: str = "auto",
+    robust: bool = True,
+    progress: Optional[Callable[[dict], Any]] = None,
+    **settings,
+) -> Reconstruction:
+    """Fits the complete tracks of a CSV file (``frame,track,x,y``) without holding them:
+    the streaming factorization of ``rank3 reconstruct --stream`` (docs/math.md §13).
+
+    The file is read in passes, each filling a block of tracks that fits ``memory`` (bytes,
+    or a string with a K, M, G or T suffix); the tracks' 2F×2F Gram matrix gives the same
+    factorization as the in-memory SVD. Affine cameras only (``"auto"`` means
+    ``"scaled-orthographic"``; ``"orthographic"``), a per-track outlier test instead of
+    RANSAC (``robust=False`` turns it off), no refinement; tracks not seen in every frame
+    are set aside (``report["set_aside"]``). Other keyword arguments override fields of
+    ``rank3::stream::StreamConfig`` (e.g. ``max_rounds=5``, ``track_probability=0.999``).
+    The result's ``report["stream"]`` says how many passes it took.
+    """
+    if isinstance(memory, str):
+        text = memory.strip()
+        scale = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+        unit = text[-1:].upper()
+        try:
+            memory = int(float(text[:-1]) * scale[unit]) if unit in scale else int(text)
+        except ValueError:
+            raise ConfigError(f"memory {text!r} is not a byte count (e.g. 512M, 2G)") from None
+    if camera == "auto":
+        camera = "scaled-orthographic"
+    over = {"memory_budget_bytes": int(memory), "camera": camera, "robust": bool(robust)}
+    over.update(settings)
+    inner = _rank3.reconstruct_stream(os.fspath(path), json.dumps(over), progress)
     return Reconstruction(inner)
 
 

@@ -135,4 +135,13 @@ def reconstruct(
     rrd: Optional[PathLike] = ...,
     progress: Optional[Progress] = ...,
 ) -> Reconstruction: ...
+def reconstruct_stream(
+    path: PathLike,
+    *,
+    memory: Union[int, str] = "1G",
+    camera: str = "auto",
+    robust: bool = True,
+    progress: Optional[Progress] = ...,
+    **settings: Any,
+) -> Reconstruction: ...
 def to_pycolmap(rec: Reconstruction, directory: PathLike) -> Any: ...

@@ -533,6 +533,41 @@ fn reconstruct(
     })
 }
 
+/// The streaming factorization of the complete tracks of a CSV file, never held whole
+/// (`rank3 reconstruct --stream`; `rank3::stream`): `settings` overrides fields of
+/// `rank3::stream::StreamConfig`.
+#[pyfunction]
+#[pyo3(signature = (path, settings, progress=None))]
+fn reconstruct_stream(
+    py: Python<'_>,
+    path: PathBuf,
+    settings: &str,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Reconstruction> {
+    let cfg = apply_settings(&rank3::stream::StreamConfig::default(), settings)?;
+    let mut obs = PyObserver::new(progress);
+    let mut library_seconds = 0.0;
+    let (rec, table) = run_detached(py, || {
+        let t0 = Instant::now();
+        let mut source = rank3::stream::CsvFile { path: path.clone() };
+        let result = rank3::stream::factorize(&mut source, &cfg, &mut obs)?;
+        let camera = match cfg.camera {
+            rank3::CameraModel::Orthographic => rank3::CameraModel::Orthographic,
+            _ => rank3::CameraModel::ScaledOrthographic,
+        };
+        // The ids only: the observations were never held.
+        let table = TrackTable::new(result.frame_ids.clone(), result.track_ids.clone());
+        let rec = result.into_reconstruction(camera);
+        library_seconds = t0.elapsed().as_secs_f64();
+        Ok((rec, table))
+    })?;
+    Ok(Reconstruction {
+        rec,
+        table,
+        library_seconds,
+    })
+}
+
 #[pymethods]
 impl Reconstruction {
     /// The reconstruction as `reconstruction.json` holds it.
@@ -801,6 +836,7 @@ fn _rank3(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(track_path, m)?)?;
     m.add_function(wrap_pyfunction!(track_frames, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
+    m.add_function(wrap_pyfunction!(reconstruct_stream, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -86,6 +86,24 @@ def test_long_tables_keep_their_ids():
         rank3.reconstruct(dup)
 
 
+def test_streaming_factorization_of_a_csv(tmp_path):
+    xy = scene(frames=10, points=60, seed=3)
+    path = tmp_path / "t.csv"
+    rank3.write_tracks(path, xy)
+    whole = rank3.reconstruct(xy, camera="scaled-orthographic", refine=False, robust=False)
+    # 2K: 2048 / (2F · 8 bytes) = 12 tracks per block, so 5 blocks: the counting pass,
+    # five Gram passes and one structure pass.
+    streamed = rank3.reconstruct_stream(path, memory="2K", robust=False)
+    assert streamed.report["stream"]["blocks"] == 5
+    assert streamed.report["stream"]["passes"] == 7
+    assert streamed.camera_model == "scaled-orthographic"
+    assert streamed.points.shape == (60, 3)
+    np.testing.assert_allclose(streamed.completed, whole.completed, atol=1e-8)
+    assert abs(streamed.rms_px - whole.rms_px) < 1e-9
+    with pytest.raises(rank3.ConfigError):
+        rank3.reconstruct_stream(path, camera="perspective")
+
+
 def test_nan_entries_are_missing_data():
     xy = scene(frames=10, points=60, missing=0.3)
     rec = rank3.reconstruct(xy, camera="orthographic")
