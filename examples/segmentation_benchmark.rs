@@ -10,8 +10,8 @@
 //! Environment: `RANK3_DATASETS` (data-set directory), `HIDE` (fractions hidden, default
 //! `0.2,0.5`), `WALKS` (random-walk tracks added as a fraction of the tracks, default 0.1),
 //! `SEED` (default 1), `SPECTRAL=0` (the energy alone, without the spectral partition at
-//! the count), `LABEL_COST`, `HYPOTHESES`, `NEIGHBOURS`, `GROW`, `SMOOTH` (the
-//! `SegmentConfig` fields of those names).
+//! the count), `LABEL_COST`, `HYPOTHESES`, `NEIGHBOURS`, `GROW`, `SMOOTH`, `EIGENGAP` (the
+//! `SegmentConfig` fields of those names; `EIGENGAP=0` counts by the label cost alone).
 
 use std::time::Instant;
 
@@ -53,6 +53,7 @@ fn run(h: &Hopkins, objects: Objects, seed: u64) -> (rank3::segment::Segmentatio
         grow_steps: env_or("GROW", SegmentConfig::default().grow_steps),
         smoothness: env_or("SMOOTH", SegmentConfig::default().smoothness),
         spectral: env_or("SPECTRAL", 1u8) == 1,
+        eigengap: env_or("EIGENGAP", SegmentConfig::default().eigengap),
         ..Default::default()
     };
     let t = Instant::now();

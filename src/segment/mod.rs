@@ -99,7 +99,9 @@ mod tests;
 /// How many objects to look for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Objects {
-    /// Chosen by the BIC label cost (at most [`SegmentConfig::max_objects`]).
+    /// Chosen from the data (at most [`SegmentConfig::max_objects`]): the label cost's
+    /// count, raised to the preference affinity's when that one's eigengap is decisive
+    /// ([`SegmentConfig::eigengap`]).
     Auto,
     /// Exactly this many groups (plus outliers).
     Count(usize),
@@ -132,6 +134,13 @@ pub struct SegmentConfig {
     /// (step 4 of the module documentation; see `spectral`). Off: the energy's own
     /// partition. Default true.
     pub spectral: bool,
+    /// With `objects = Auto` and `spectral`: the count is raised to `K'` when the
+    /// normalized preference affinity's eigenvalues (descending, the first 1) have their
+    /// largest gap among the first `max_objects + 1` after the `K'`-th and that gap
+    /// `λ_K' − λ_K'+1` is at least this. The label cost under-counts partly dependent
+    /// motions, which the affinity separates (docs/math.md §11). 0 or above 1 disables
+    /// it. Default 0.5 (measured: docs/results.md).
+    pub eigengap: f64,
     /// ALS sweeps per refit. Default 15.
     pub refit_sweeps: usize,
     /// Multiplier of the BIC label cost `β_g` (1 = BIC). Default 1.
@@ -166,6 +175,7 @@ impl Default for SegmentConfig {
             smoothness: 0.0,
             rounds: 12,
             spectral: true,
+            eigengap: 0.5,
             refit_sweeps: 15,
             label_cost_scale: 8.0,
             max_group_sigma: 2.0,
@@ -639,10 +649,24 @@ fn segment_tracks<R: Rng + ?Sized>(
     //    spectral clustering of the tracks' preferences, refined locally (assign, refit;
     //    no swaps): see `spectral` for why the energy does not choose between partitions
     //    of one count.
-    let count = match cfg.objects {
+    let mut count = match cfg.objects {
         Objects::Count(k) => k,
         Objects::Auto => best.chosen.len(),
     };
+    if cfg.spectral
+        && matches!(cfg.objects, Objects::Auto)
+        && cfg.eigengap > 0.0
+        && cfg.eigengap <= 1.0
+    {
+        let sigma2 = crate::eval::median(&pool.sigma2[..n_sampled]).max(info.sigma2_floor);
+        if let Some((k_gap, gap)) =
+            eigengap_count(&info, &pool, n_sampled, &eligible, sigma2, cfg.max_objects)
+            && gap >= cfg.eigengap
+            && k_gap > count
+        {
+            count = k_gap;
+        }
+    }
     let mut spectral_result: Option<DescentResult> = None;
     if cfg.spectral {
         let sigma2 = crate::eval::median(&pool.sigma2[..n_sampled]).max(info.sigma2_floor);
@@ -972,6 +996,36 @@ fn spectral_groups<R: Rng + ?Sized>(
             })
             .collect(),
     )
+}
+
+/// The count the preference affinity's spectrum names: `K` maximizing the eigengap
+/// `λ_K − λ_{K+1}` of `D^{-1/2} A D^{-1/2}` ([`spectral::Spectral`], over the `h_sampled`
+/// sampled hypotheses) for `K ≤ max_k`, with that gap. Beyond [`spectral::MAX_TRACKS`]
+/// tracks an evenly spaced subset is used (no random draw: the rest of the run is the
+/// same with or without this test). `O(n²H + n³)`.
+fn eigengap_count(
+    info: &TrackInfo<'_>,
+    pool: &Pool,
+    h_sampled: usize,
+    eligible: &[usize],
+    sigma2: f64,
+    max_k: usize,
+) -> Option<(usize, f64)> {
+    let step = eligible.len().div_ceil(spectral::MAX_TRACKS).max(1);
+    let tracks: Vec<usize> = eligible.iter().step_by(step).copied().collect();
+    let r2 = |h: usize, p: usize| {
+        let nu = info.nu[p];
+        if nu > 0.0 {
+            pool.chi[h][p] / nu as f32
+        } else {
+            f32::INFINITY
+        }
+    };
+    let sp = spectral::Spectral::new(r2, h_sampled, sigma2, tracks, 1)?;
+    let ev = &sp.eigenvalues;
+    (1..=max_k.min(ev.len().saturating_sub(1)))
+        .map(|k| (k, ev[k - 1] - ev[k]))
+        .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
 }
 
 /// Label set search (step 3): greedy additions, then removals and swaps, each accepted

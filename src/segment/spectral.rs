@@ -53,7 +53,6 @@ pub struct Spectral {
     /// The tracks clustered (input column indices).
     pub tracks: Vec<usize>,
     /// Eigenvalues of `D^{-1/2} A D^{-1/2}`, largest first (the first is 1).
-    #[cfg_attr(not(test), allow(dead_code))]
     pub eigenvalues: Vec<f64>,
     /// The leading eigenvectors, one column each, largest eigenvalue first.
     vectors: Mat<f64>,
