@@ -377,6 +377,12 @@ struct Reader<'a, S: ObservationSource + ?Sized> {
     frame_of: Vec<u32>,
     position: Vec<u32>,
     frames: usize,
+    /// Observations the first pass read (a later pass that reads another count means the
+    /// file changed).
+    observations: usize,
+    /// The sum of the first pass's [`fingerprint`]s (a later pass with another sum read
+    /// other values).
+    checksum: u64,
     /// The first pass's ids, for messages.
     frame_ids: Vec<Id>,
     track_ids: Vec<Id>,
@@ -403,15 +409,18 @@ impl<S: ObservationSource + ?Sized> Reader<'_, S> {
         let mut seen = vec![0u64; (cols * nf).div_ceil(64)];
         let mut dup: Option<(u32, u32, u32)> = None;
         let (frame_of, position) = (&self.frame_of, &self.position);
+        let mut alien = false;
         let mut put = |frame: u32, track: u32, vx: f64, vy: f64, line: u32| {
-            let k = position[track as usize];
+            let (Some(&k), Some(&f)) = (position.get(track as usize), frame_of.get(frame as usize))
+            else {
+                // An id the first pass did not see: the file changed since.
+                alien = true;
+                return;
+            };
             if k == u32::MAX || slots[k as usize] == u32::MAX {
                 return;
             }
-            let (f, c) = (
-                frame_of[frame as usize] as usize,
-                slots[k as usize] as usize,
-            );
+            let (f, c) = (f as usize, slots[k as usize] as usize);
             let bit = f * cols + c;
             if seen[bit / 64] & (1 << (bit % 64)) != 0 {
                 dup.get_or_insert((frame, track, line));
@@ -425,19 +434,38 @@ impl<S: ObservationSource + ?Sized> Reader<'_, S> {
             Some(list) => list.iter().for_each(|e| put(e.frame, e.track, e.x, e.y, 0)),
             None => {
                 let t0 = Instant::now();
+                let mut sum = 0u64;
                 let r = self.source.scan(&mut |obs| {
-                    obs.iter()
-                        .for_each(|o| put(o.frame, o.track, o.x, o.y, o.line));
+                    for o in obs {
+                        sum = sum.wrapping_add(fingerprint(o));
+                        put(o.frame, o.track, o.x, o.y, o.line);
+                    }
                     Ok(())
                 });
                 self.passes += 1;
                 self.read_seconds += t0.elapsed().as_secs_f64();
-                r?;
+                let n = r?.observations;
+                if alien || n != self.observations || sum != self.checksum {
+                    return Err(self.changed(n));
+                }
             }
         }
         match dup {
             Some((frame, track, line)) => Err(self.duplicate(frame, track, line)),
             None => Ok(x),
+        }
+    }
+
+    /// The error for a source that changed between passes (`n` observations now).
+    fn changed(&self, n: usize) -> Error {
+        let message = format!(
+            "the file changed while it was read: {} observations on the first pass, {n} on \
+             pass {} (or other ids or values)",
+            self.observations, self.passes
+        );
+        match self.source.path() {
+            Some(path) => Error::io(path, std::io::Error::other(message)),
+            None => Error::InvalidModel(message),
         }
     }
 
@@ -468,6 +496,18 @@ impl<S: ObservationSource + ?Sized> Reader<'_, S> {
     }
 }
 
+/// An order-independent fingerprint of one observation (its sum over a pass tells whether a
+/// later pass read the same observations): splitmix64 of its ids and values.
+fn fingerprint(o: &ScannedObservation) -> u64 {
+    let mut z = (u64::from(o.frame) << 32 | u64::from(o.track))
+        ^ o.x.to_bits().rotate_left(17)
+        ^ o.y.to_bits().rotate_left(41);
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
 /// Fits the complete tracks of `source` without holding its measurement matrix: see the
 /// module docs for the objective, the method and the cost. Bad input (a repeated
 /// frame–track pair, too few complete tracks or frames, a rank below 3) is an `Err`; the
@@ -487,8 +527,10 @@ pub fn factorize<S: ObservationSource + ?Sized>(
     let mut list = Some(Vec::new());
     let max_list = cfg.memory_budget_bytes / LIST_BYTES;
     let t0 = Instant::now();
+    let mut checksum = 0u64;
     let scanned = source.scan(&mut |obs| {
         for o in obs {
+            checksum = checksum.wrapping_add(fingerprint(o));
             let p = o.track as usize;
             if p >= counts.len() {
                 counts.resize(p + 1, 0);
@@ -584,6 +626,8 @@ pub fn factorize<S: ObservationSource + ?Sized>(
             .collect(),
         frame_of: scanned.frame_order.clone(),
         frames: nf,
+        observations: scanned.observations,
+        checksum,
         frame_ids: scanned.frame_ids.clone(),
         track_ids: scanned.track_ids.clone(),
     };
@@ -1037,19 +1081,31 @@ fn structure_sums<S: ObservationSource + ?Sized>(
         None => {
             // (A repeated pair was refused by the Gram pass.)
             let (frame_of, position) = (reader.frame_of.clone(), reader.position.clone());
-            reader.scan(&mut |obs| {
-                for o in obs {
-                    let k = position[o.track as usize];
-                    if k == u32::MAX {
-                        continue;
+            let (mut alien, mut sum) = (false, 0u64);
+            let n = reader
+                .scan(&mut |obs| {
+                    for o in obs {
+                        sum = sum.wrapping_add(fingerprint(o));
+                        let (Some(&k), Some(&f)) = (
+                            position.get(o.track as usize),
+                            frame_of.get(o.frame as usize),
+                        ) else {
+                            alien = true;
+                            continue;
+                        };
+                        if k == u32::MAX {
+                            continue;
+                        }
+                        let (s, f) = (&mut sums[k as usize], f as usize);
+                        s.add(fit, 2 * f, o.x - fit.t[2 * f]);
+                        s.add(fit, 2 * f + 1, o.y - fit.t[2 * f + 1]);
                     }
-                    let f = frame_of[o.frame as usize] as usize;
-                    let s = &mut sums[k as usize];
-                    s.add(fit, 2 * f, o.x - fit.t[2 * f]);
-                    s.add(fit, 2 * f + 1, o.y - fit.t[2 * f + 1]);
-                }
-                Ok(())
-            })?;
+                    Ok(())
+                })?
+                .observations;
+            if alien || n != reader.observations || sum != reader.checksum {
+                return Err(reader.changed(n));
+            }
         }
     }
     Ok(sums)
@@ -1502,6 +1558,61 @@ mod tests {
         let rec = r.into_reconstruction(CameraModel::ScaledOrthographic);
         assert_eq!(rec.points.len(), t.n_tracks() - 2);
         assert_eq!(rec.points.iter().filter(|p| !p.inlier).count(), r_outliers);
+    }
+
+    /// A source whose later passes read another table (a file rewritten during the run).
+    struct Changing<'a> {
+        first: &'a TrackTable,
+        later: &'a TrackTable,
+        scans: usize,
+    }
+
+    impl ObservationSource for Changing<'_> {
+        fn scan(
+            &mut self,
+            visit: &mut dyn FnMut(&[ScannedObservation]) -> Result<()>,
+        ) -> Result<Scanned> {
+            self.scans += 1;
+            let t = if self.scans == 1 {
+                self.first
+            } else {
+                self.later
+            };
+            TableSource(t).scan(visit)
+        }
+
+        fn path(&self) -> Option<&Path> {
+            None
+        }
+    }
+
+    #[test]
+    fn a_source_that_changes_between_passes_is_an_error_not_a_panic() {
+        let (a, b) = (scene(0.0, 1), scene(0.0, 2));
+        let mut more = generate(&SynthConfig {
+            frames: 12,
+            points: 120,
+            seed: 3,
+            ..Default::default()
+        })
+        .unwrap()
+        .table;
+        for later in [&b.table, &mut more] {
+            let mut source = Changing {
+                first: &a.table,
+                later,
+                scans: 0,
+            };
+            let cfg = StreamConfig {
+                memory_budget_bytes: 10 * 2 * 12 * 8,
+                ..Default::default()
+            };
+            let err = factorize(&mut source, &cfg, &mut NoopObserver).unwrap_err();
+            assert!(
+                err.to_string().contains("changed while it was read"),
+                "{err}"
+            );
+        }
     }
 
     #[test]
