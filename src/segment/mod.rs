@@ -968,16 +968,7 @@ fn spectral_groups<R: Rng + ?Sized>(
         tracks.truncate(spectral::MAX_TRACKS);
         tracks.sort_unstable();
     }
-    // Per-coordinate squared residuals `r²_ph = (ν_p r²_ph) / ν_p`, read from the pool.
-    let r2 = |h: usize, p: usize| {
-        let nu = info.nu[p];
-        if nu > 0.0 {
-            pool.chi[h][p] / nu as f32
-        } else {
-            f32::INFINITY
-        }
-    };
-    let sp = spectral::Spectral::new(r2, pool.models.len(), sigma2, tracks, k)?;
+    let sp = spectral::Spectral::new(pool_r2(info, pool), pool.models.len(), sigma2, tracks, k)?;
     let groups: Vec<Vec<usize>> = sp
         .clusters(k, 10, rng)
         .into_iter()
@@ -998,6 +989,19 @@ fn spectral_groups<R: Rng + ?Sized>(
     )
 }
 
+/// Per-coordinate squared residuals `r²_ph = (ν_p r²_ph) / ν_p` of track `p` under pool
+/// hypothesis `h` (infinite when the track has no degrees of freedom).
+fn pool_r2<'a>(info: &'a TrackInfo<'_>, pool: &'a Pool) -> impl Fn(usize, usize) -> f32 + 'a {
+    move |h, p| {
+        let nu = info.nu[p];
+        if nu > 0.0 {
+            pool.chi[h][p] / nu as f32
+        } else {
+            f32::INFINITY
+        }
+    }
+}
+
 /// The count the preference affinity's spectrum names: `K` maximizing the eigengap
 /// `λ_K − λ_{K+1}` of `D^{-1/2} A D^{-1/2}` ([`spectral::Spectral`], over the `h_sampled`
 /// sampled hypotheses) for `K ≤ max_k`, with that gap. Beyond [`spectral::MAX_TRACKS`]
@@ -1013,15 +1017,7 @@ fn eigengap_count(
 ) -> Option<(usize, f64)> {
     let step = eligible.len().div_ceil(spectral::MAX_TRACKS).max(1);
     let tracks: Vec<usize> = eligible.iter().step_by(step).copied().collect();
-    let r2 = |h: usize, p: usize| {
-        let nu = info.nu[p];
-        if nu > 0.0 {
-            pool.chi[h][p] / nu as f32
-        } else {
-            f32::INFINITY
-        }
-    };
-    let sp = spectral::Spectral::new(r2, h_sampled, sigma2, tracks, 1)?;
+    let sp = spectral::Spectral::new(pool_r2(info, pool), h_sampled, sigma2, tracks, 1)?;
     let ev = &sp.eigenvalues;
     (1..=max_k.min(ev.len().saturating_sub(1)))
         .map(|k| (k, ev[k - 1] - ev[k]))
