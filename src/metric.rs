@@ -338,6 +338,48 @@ pub fn apply_necker_convention(model: &mut crate::MetricModel) -> bool {
     true
 }
 
+/// The metric cameras of an affine factorization: frame `f`'s rows `Qᵀî_f`, `Qᵀĵ_f` (of
+/// `M̂Q`) projected onto the nearest scaled rotation ([`nearest_camera`]; scale 1 for the
+/// orthographic camera), translations `t` (2F), no points. A frame whose two rows are
+/// linearly dependent is [`Error::Degenerate`]. `O(F)`.
+pub fn cameras(
+    m_hat: MatRef<'_, f64>,
+    q: &Matrix3<f64>,
+    t: &[f64],
+    camera: CameraModel,
+) -> Result<crate::MetricModel> {
+    let f = m_hat.nrows() / 2;
+    let mut model = crate::MetricModel {
+        rotations: Vec::with_capacity(f),
+        translations: Vec::with_capacity(f),
+        scales: Vec::with_capacity(f),
+        points: Vec::new(),
+        aspect: 1.0,
+    };
+    for k in 0..f {
+        let i = q.transpose() * row3(m_hat, 2 * k);
+        let j = q.transpose() * row3(m_hat, 2 * k + 1);
+        let (r, s) = nearest_camera(&i, &j).ok_or_else(|| {
+            Error::Degenerate(format!(
+                "frame {k}: the metric camera rows are linearly dependent (the frame's \
+                 image motion is degenerate)"
+            ))
+        })?;
+        model.rotations.push(r);
+        model.scales.push(match camera {
+            CameraModel::Orthographic => 1.0,
+            CameraModel::ScaledOrthographic
+            | CameraModel::Projective
+            | CameraModel::Perspective
+            | CameraModel::Auto => s,
+        });
+        model
+            .translations
+            .push(nalgebra::Vector2::new(t[2 * k], t[2 * k + 1]));
+    }
+    Ok(model)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

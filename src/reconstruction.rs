@@ -25,7 +25,7 @@
 use std::time::Instant;
 
 use faer::Mat;
-use nalgebra::{Vector2, Vector3};
+use nalgebra::Vector3;
 use serde::Serialize;
 
 use rand::SeedableRng;
@@ -2917,42 +2917,13 @@ fn initial_model(
     up: &MetricUpgrade,
     camera: CameraModel,
 ) -> Result<MetricModel> {
-    let f = meas.n_frames();
     let q = up.q;
-    let mut rotations = Vec::with_capacity(f);
-    let mut scales = Vec::with_capacity(f);
-    let mut translations = Vec::with_capacity(f);
-    for k in 0..f {
-        let row = |r: usize| {
-            Vector3::new(
-                affine.m_hat[(r, 0)],
-                affine.m_hat[(r, 1)],
-                affine.m_hat[(r, 2)],
-            )
-        };
-        let i = q.transpose() * row(2 * k);
-        let j = q.transpose() * row(2 * k + 1);
-        let (r, s) = metric::nearest_camera(&i, &j).ok_or_else(|| {
-            Error::Degenerate(format!(
-                "frame {k}: the metric camera rows are linearly dependent (the frame's \
-                 image motion is degenerate)"
-            ))
-        })?;
-        rotations.push(r);
-        scales.push(match camera {
-            CameraModel::Orthographic => 1.0,
-            CameraModel::ScaledOrthographic
-            | CameraModel::Projective
-            | CameraModel::Perspective
-            | CameraModel::Auto => s,
-        });
-        translations.push(Vector2::new(affine.t[2 * k], affine.t[2 * k + 1]));
-    }
+    let mut model = metric::cameras(affine.m_hat.as_ref(), &q, &affine.t, camera)?;
     let qinv = q.try_inverse().ok_or_else(|| Error::Numerical {
         stage: "metric upgrade",
         message: "Q is singular".into(),
     })?;
-    let points = (0..meas.n_points())
+    model.points = (0..meas.n_points())
         .map(|p| {
             qinv * Vector3::new(
                 affine.s_hat[(0, p)],
@@ -2961,13 +2932,6 @@ fn initial_model(
             )
         })
         .collect();
-    let mut model = MetricModel {
-        rotations,
-        translations,
-        scales,
-        points,
-        aspect: 1.0,
-    };
     model.triangulate(meas);
     Ok(model)
 }

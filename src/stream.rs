@@ -23,9 +23,10 @@
 //! **Reading.** A source ([`ObservationSource`]) is scanned in passes; any row order is
 //! allowed (a CSV file is typically frame-major, so a track's entries are far apart). The
 //! complete tracks are cut into blocks of `B` tracks whose `2F × B` values fit the memory
-//! budget; each Gram pass fills one block. A table that fits takes one pass after the
-//! counting pass, and its block stays in memory for the rest; a larger one takes `⌈N/B⌉`
-//! passes, plus one per structure pass. Partial tracks (not seen in every frame) are set
+//! budget; each Gram pass fills one block. When the first (counting) pass's entries and the
+//! block built from them fit the budget (40 bytes per observation) the source is read once
+//! and the block stays in memory for the rest; otherwise `1 + ⌈N/B⌉` passes, plus one per
+//! structure pass and one per downdate of the track test. Partial tracks (not seen in every frame) are set
 //! aside and reported: this path is for complete tables (the dense and sparse pipelines
 //! take missing data).
 //!
@@ -53,7 +54,7 @@ use std::time::Instant;
 
 use faer::linalg::matmul::triangular::BlockStructure;
 use faer::{Mat, Par, Side};
-use nalgebra::{Matrix3, Vector2, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 
 use crate::camera::MetricModel;
@@ -66,9 +67,10 @@ use crate::{CameraModel, Error, Id, Result};
 /// Settings of [`factorize`]. Every field has a documented default.
 #[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct StreamConfig {
-    /// Bytes for the block of `W` held at once (`16·F` bytes per track, plus 4·F for the
-    /// duplicate check). The Gram matrix (`32·F²` bytes) and the per-track sums (about 90
-    /// bytes per track) come on top. Default 1 GiB.
+    /// Bytes for the block of `W` held at once (`16·F` bytes per track; a table whose
+    /// first-pass list and block, 40 bytes per observation, fit is read once). The Gram
+    /// matrix (`32·F²` bytes), the duplicate check (`F/8` bytes per track of the block) and
+    /// the per-track sums (about 90 bytes per track) come on top. Default 1 GiB.
     pub memory_budget_bytes: usize,
     /// [`CameraModel::Orthographic`] or [`CameraModel::ScaledOrthographic`] (the default;
     /// [`CameraModel::Auto`] means it). The perspective cameras need the dense or sparse
@@ -248,6 +250,9 @@ pub struct StreamReport {
 /// source's ids (ascending when all are integers, else first appearance).
 #[derive(Debug, Clone)]
 pub struct StreamResult {
+    /// The camera fitted ([`CameraModel::Orthographic`] or
+    /// [`CameraModel::ScaledOrthographic`]).
+    pub camera: CameraModel,
     pub frame_ids: Vec<Id>,
     pub track_ids: Vec<Id>,
     pub observations: usize,
@@ -739,6 +744,7 @@ pub fn factorize<S: ObservationSource + ?Sized>(
                 seconds: start.elapsed().as_secs_f64(),
             };
             return Ok(finish(Finish {
+                camera,
                 fit,
                 sums,
                 residual,
@@ -762,29 +768,25 @@ pub fn factorize<S: ObservationSource + ?Sized>(
                 have: remaining,
             });
         }
-        // Downdate / update the Gram by the changed tracks' columns.
-        let (gone, back) = match &kept_block {
-            Some(x) => (
-                Mat::from_fn(taken_out.len(), rows, |c, r| x[(taken_out[c], r)]),
-                Mat::from_fn(put_back.len(), rows, |c, r| x[(put_back[c], r)]),
-            ),
+        // Downdate / update the Gram by the changed tracks (taken out, then put back), one
+        // shifted row each: from the block in memory, or gathered by one pass.
+        let changed: Vec<usize> = taken_out.iter().chain(&put_back).copied().collect();
+        let x = match &kept_block {
+            Some(x) => Mat::from_fn(changed.len(), rows, |c, r| x[(changed[c], r)]),
             None => {
                 let mut slots = vec![u32::MAX; n_complete];
-                for (c, &k) in taken_out.iter().chain(&put_back).enumerate() {
+                for (c, &k) in changed.iter().enumerate() {
                     slots[k] = c as u32;
                 }
-                let mut x = reader.fill(&slots, taken_out.len() + put_back.len())?;
+                let mut x = reader.fill(&slots, changed.len())?;
                 gram.shift(&mut x);
-                let split = taken_out.len();
-                (
-                    Mat::from_fn(split, rows, |c, r| x[(c, r)]),
-                    Mat::from_fn(put_back.len(), rows, |c, r| x[(split + c, r)]),
-                )
+                x
             }
         };
         let t0 = Instant::now();
-        gram.add(gone.as_ref(), -1.0);
-        gram.add(back.as_ref(), 1.0);
+        let split = taken_out.len();
+        gram.add(x.as_ref().subrows(0, split), -1.0);
+        gram.add(x.as_ref().subrows(split, put_back.len()), 1.0);
         gram_seconds += t0.elapsed().as_secs_f64();
         for &k in &taken_out {
             out[k] = true;
@@ -834,35 +836,7 @@ fn fit_round(gram: &Gram, camera: CameraModel, metric_cfg: &MetricConfig) -> Res
     let trace: f64 = (0..rows).map(|r| c[(r, r)]).sum();
     let affine_ss = (trace - lambda[..3].iter().sum::<f64>()).max(0.0);
     let upgrade = metric::upgrade(m_hat.as_ref(), camera, metric_cfg)?;
-    let q = upgrade.q;
-    let mut model = MetricModel {
-        rotations: Vec::with_capacity(nf),
-        translations: Vec::with_capacity(nf),
-        scales: Vec::with_capacity(nf),
-        points: Vec::new(),
-        aspect: 1.0,
-    };
-    for f in 0..nf {
-        let row = |r: usize| Vector3::new(m_hat[(r, 0)], m_hat[(r, 1)], m_hat[(r, 2)]);
-        let (rot, s) = metric::nearest_camera(
-            &(q.transpose() * row(2 * f)),
-            &(q.transpose() * row(2 * f + 1)),
-        )
-        .ok_or_else(|| {
-            Error::Degenerate(format!(
-                "frame {f}: the metric camera rows are linearly dependent (the frame's image \
-                 motion is degenerate)"
-            ))
-        })?;
-        model.rotations.push(rot);
-        model.scales.push(match camera {
-            CameraModel::Orthographic => 1.0,
-            _ => s,
-        });
-        model
-            .translations
-            .push(Vector2::new(t[2 * f], t[2 * f + 1]));
-    }
+    let mut model = metric::cameras(m_hat.as_ref(), &upgrade.q, &t, camera)?;
     // The gauge of the dense path (first camera's rotation the identity, its scale 1) and
     // the depth-reversal convention; the points' centroid is 0 by construction (`t` is
     // the mean of the fit's tracks).
@@ -1027,11 +1001,8 @@ impl TrackSums {
 
     /// Adds the centred entry `d = w_r − t_r`.
     fn add(&mut self, fit: &RoundFit, r: usize, d: f64) {
-        for i in 0..3 {
-            self.b[i] += fit.m[(r, i)] * d;
-            self.a[i] += fit.u3[(r, i)] * d;
-        }
-        self.ss += d * d;
+        let (m, u) = (fit.m.row(r), fit.u3.row(r));
+        self.add_row(&[m[0], m[1], m[2]], &[u[0], u[1], u[2]], d);
     }
 
     fn point(&self, fit: &RoundFit) -> Vector3<f64> {
@@ -1112,6 +1083,7 @@ fn structure_sums<S: ObservationSource + ?Sized>(
 }
 
 struct Finish {
+    camera: CameraModel,
     fit: RoundFit,
     sums: Vec<TrackSums>,
     residual: Vec<f64>,
@@ -1129,6 +1101,7 @@ struct Finish {
 
 fn finish(f: Finish) -> StreamResult {
     let Finish {
+        camera,
         fit,
         sums,
         residual,
@@ -1159,6 +1132,7 @@ fn finish(f: Finish) -> StreamResult {
     let affine_rms_px = (fit.affine_ss / (rows as f64 * n)).sqrt();
     let m_hat = Mat::from_fn(rows, 3, |r, k| fit.u3[(r, k)] * fit.sqrt_s[k]);
     StreamResult {
+        camera,
         frame_ids,
         observations,
         model,
@@ -1188,7 +1162,7 @@ impl StreamResult {
     /// The [`Reconstruction`](crate::Reconstruction) of this fit, for the outputs
     /// (`reconstruction.json` with a `stream` report, `completed.txt` = the affine prediction
     /// `M̂Ŝ + t1ᵀ`, `points.ply`). Its `timings` are the report's.
-    pub fn into_reconstruction(self, camera: CameraModel) -> crate::Reconstruction {
+    pub fn into_reconstruction(self) -> crate::Reconstruction {
         use crate::reconstruction::{
             AffinePrediction, FactorizationReport, FrameResult, InputSummary, PointResult,
             StageTime,
@@ -1257,7 +1231,7 @@ impl StreamResult {
             ));
         }
         crate::Reconstruction {
-            camera_model: camera,
+            camera_model: self.camera,
             model_selection: None,
             frames,
             points,
@@ -1555,7 +1529,7 @@ mod tests {
         // The fit without them is at the noise level (0.5 px).
         assert!(r.metric_rms_px < 0.6, "{}", r.metric_rms_px);
         let r_outliers = r.outliers.len();
-        let rec = r.into_reconstruction(CameraModel::ScaledOrthographic);
+        let rec = r.into_reconstruction();
         assert_eq!(rec.points.len(), t.n_tracks() - 2);
         assert_eq!(rec.points.iter().filter(|p| !p.inlier).count(), r_outliers);
     }

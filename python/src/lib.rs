@@ -551,13 +551,9 @@ fn reconstruct_stream(
         let t0 = Instant::now();
         let mut source = rank3::stream::CsvFile { path: path.clone() };
         let result = rank3::stream::factorize(&mut source, &cfg, &mut obs)?;
-        let camera = match cfg.camera {
-            rank3::CameraModel::Orthographic => rank3::CameraModel::Orthographic,
-            _ => rank3::CameraModel::ScaledOrthographic,
-        };
         // The ids only: the observations were never held.
         let table = TrackTable::new(result.frame_ids.clone(), result.track_ids.clone());
-        let rec = result.into_reconstruction(camera);
+        let rec = result.into_reconstruction();
         library_seconds = t0.elapsed().as_secs_f64();
         Ok((rec, table))
     })?;

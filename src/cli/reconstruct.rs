@@ -460,11 +460,7 @@ fn reconstruct_streamed(a: &ReconstructArgs) -> Result<(), rank3::Error> {
         report.block_tracks,
         start.elapsed().as_secs_f64()
     );
-    let camera = match a.camera {
-        CameraArg::Orthographic => rank3::CameraModel::Orthographic,
-        _ => rank3::CameraModel::ScaledOrthographic,
-    };
-    let rec = result.into_reconstruction(camera);
+    let rec = result.into_reconstruction();
     #[cfg(feature = "rerun")]
     if let Some(r) = recording.as_ref() {
         rank3::recording::log_streamed(r, &rec)?;

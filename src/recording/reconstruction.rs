@@ -63,23 +63,17 @@ pub(super) fn log_result(
             options,
         )?;
     }
-    log_factorization(rec, result)?;
-    log_metric(rec, result)?;
     log_projective(rec, table, result, options)?;
     log_perspective(rec, table, result, options)?;
-    at_stage(rec, "result");
-    rec.log(
-        paths::SUMMARY,
-        &TextDocument::from_markdown(summary_markdown(result)),
-    )?;
-    // The 3D views open on the structures just logged.
-    refresh_layout(rec)
+    // The factorization, the structures and the summary (each at its own stage; the 3D
+    // views open on the structures just logged).
+    log_streamed(rec, result)
 }
 
 /// Logs a reconstruction made without a table in memory ([`crate::stream`], `reconstruct
 /// --stream`): the singular values and σ4/σ3, the affine and metric structure, the cameras,
 /// the upgrade and the summary. The input, W and the per-entry residuals need the table and
-/// are not logged.
+/// are not logged. Also the last part of [`log_reconstruction`].
 ///
 /// Cost: O(F + N).
 pub fn log_streamed(rec: &RecordingStream, result: &Reconstruction) -> RecordingResult {
