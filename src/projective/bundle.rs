@@ -398,22 +398,6 @@ impl Pattern {
         }
     }
 
-    /// Where column `col` of block `(f, g)`, `f ≥ g`, starts in the values: entry
-    /// `(r, col)` is at `base + r` for `r ≥ r0` (`r0 = col` on the diagonal, else 0).
-    #[inline]
-    fn column(&self, f: usize, g: usize, col: usize) -> (usize, usize) {
-        let c = self.c;
-        let start = self.col_ptr[g * c + col];
-        if f == g {
-            (start - col, col)
-        } else {
-            let k = self.nbrs[g]
-                .binary_search(&f)
-                .unwrap_or_else(|_| unreachable!());
-            (start + (c - col) + k * c, 0)
-        }
-    }
-
     /// Value index of the shared-unknown row `r` in column `col` of camera `g`.
     #[inline]
     fn glob_in_cam(&self, g: usize, col: usize, r: usize) -> usize {
@@ -637,12 +621,49 @@ fn frame_ranges(pattern: &Pattern, nf: usize, cd: usize, parts: usize) -> Vec<(u
 /// `rhs_f += W_f V⁻¹ g_p` for `f` in `a..b`. `vals` holds the CSC values from `offset` on
 /// (the columns of the range), `rhs` the range's right-hand side; `ygs` holds `Y_g = W_g V⁻¹`
 /// per track (empty without shared parameters). `O(Σ_p k_p² c² d)` over the range's tracks.
+///
+/// The block sizes of the models in use (`d = 3`, `c` = 5, 6, 7, 11, 12) get their own
+/// copies of the loops with the sizes known at compile time (unrolled and vectorized: the
+/// adjustment of a 2 000-frame corridor, 19 solves, 13.6 → 7.9 s, docs/results.md); other
+/// sizes take the general loops.
 #[allow(clippy::too_many_arguments)]
 fn schur_columns(
     g: &Graph,
     pattern: &Pattern,
+    range: (usize, usize),
+    dims: (usize, usize, usize),
+    lin: (&[f64], usize),
+    lins: &[TrackLin],
+    vinv: &[Vec<f64>],
+    ygs: &[f64],
+    vals: &mut [f64],
+    offset: usize,
+    rhs: &mut [f64],
+) {
+    macro_rules! sized {
+        ($($c:literal),*) => {
+            match (dims.0, dims.1) {
+                $(($c, 3) => schur_columns_sized::<$c, 3>(
+                    g, pattern, range, dims, lin, lins, vinv, ygs, vals, offset, rhs,
+                ),)*
+                _ => schur_columns_sized::<0, 0>(
+                    g, pattern, range, dims, lin, lins, vinv, ygs, vals, offset, rhs,
+                ),
+            }
+        };
+    }
+    sized!(5, 6, 7, 11, 12)
+}
+
+/// [`schur_columns`] with the camera and point tangent sizes `CD`, `PD` fixed at compile
+/// time (`0`: read from `dims` at run time).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn schur_columns_sized<const CD: usize, const PD: usize>(
+    g: &Graph,
+    pattern: &Pattern,
     (a, b): (usize, usize),
-    (cd, pd, k): (usize, usize, usize),
+    (cd_rt, pd_rt, k): (usize, usize, usize),
     (lin, stride): (&[f64], usize),
     lins: &[TrackLin],
     vinv: &[Vec<f64>],
@@ -651,7 +672,8 @@ fn schur_columns(
     offset: usize,
     rhs: &mut [f64],
 ) {
-    let mut y = vec![0.0; cd * pd];
+    let cd = if CD > 0 { CD } else { cd_rt };
+    let pd = if PD > 0 { PD } else { pd_rt };
     let mut ys: Vec<f64> = Vec::new();
     for p in 0..g.n_pts {
         let range = g.track(p);
@@ -665,9 +687,11 @@ fn schur_columns(
         }
         let vi = &vinv[p];
         let gp = &lins[p].gp;
+        // Y_i = W_i V⁻¹ for every observation of the track.
         ys.resize(range.len() * cd * pd, 0.0);
         for (i, o) in range.clone().enumerate() {
             let wb = &lin[o * stride..o * stride + cd * pd];
+            let y = &mut ys[i * cd * pd..(i + 1) * cd * pd];
             for c1 in 0..cd {
                 for d2 in 0..pd {
                     let mut s = 0.0;
@@ -677,11 +701,13 @@ fn schur_columns(
                     y[c1 * pd + d2] = s;
                 }
             }
-            ys[i * cd * pd..(i + 1) * cd * pd].copy_from_slice(&y);
             let f = g.cam[o];
             if (a..b).contains(&f) {
                 for c1 in 0..cd {
-                    let s: f64 = (0..pd).map(|d| y[c1 * pd + d] * gp[d]).sum();
+                    let mut s = 0.0;
+                    for d in 0..pd {
+                        s += y[c1 * pd + d] * gp[d];
+                    }
                     rhs[(f - a) * cd + c1] += s;
                 }
             }
@@ -702,33 +728,54 @@ fn schur_columns(
                 }
             }
         }
-        let obs: Vec<usize> = range.collect();
-        for (i, &oi) in obs.iter().enumerate() {
-            let fi = g.cam[oi];
-            if fi < a {
+        // Column blocks (fj in a..b), rows fi ≥ fj: the later observations of the track.
+        let n = range.len();
+        for j in 0..n {
+            let oj = range.start + j;
+            let fj = g.cam[oj];
+            if fj < a {
                 continue;
             }
-            let yi = &ys[i * cd * pd..(i + 1) * cd * pd];
-            for &oj in &obs[..=i] {
-                let fj = g.cam[oj];
-                if fj < a {
-                    continue;
-                }
-                if fj >= b {
-                    break;
-                }
-                // Column c2 of block (fi, fj) is contiguous in the CSC values.
-                let wj = &lin[oj * stride..oj * stride + cd * pd];
-                for c2 in 0..cd {
-                    let (base, r0) = pattern.column(fi, fj, c2);
-                    let w2 = &wj[c2 * pd..(c2 + 1) * pd];
-                    for c1 in r0..cd {
-                        let y1 = &yi[c1 * pd..(c1 + 1) * pd];
-                        let mut s = 0.0;
-                        for d in 0..pd {
-                            s += y1[d] * w2[d];
+            if fj >= b {
+                break;
+            }
+            let wj = &lin[oj * stride..oj * stride + cd * pd];
+            let cols = &pattern.col_ptr[fj * cd..(fj + 1) * cd];
+            let nbrs = &pattern.nbrs[fj];
+            // Column c2 of block (fj, fj) holds rows c2..cd from cols[c2]; of block
+            // (fi, fj), fi > fj, rows 0..cd from cols[c2] + (cd − c2) + kk·cd, kk the
+            // place of fi among fj's neighbours (increasing with i: a forward scan).
+            let mut kk = 0;
+            for i in j..n {
+                let fi = g.cam[range.start + i];
+                let yi = &ys[i * cd * pd..(i + 1) * cd * pd];
+                if fi == fj {
+                    for c2 in 0..cd {
+                        let base = cols[c2] - offset - c2;
+                        let w2 = &wj[c2 * pd..(c2 + 1) * pd];
+                        for c1 in c2..cd {
+                            let mut s = 0.0;
+                            for d in 0..pd {
+                                s += yi[c1 * pd + d] * w2[d];
+                            }
+                            vals[base + c1] -= s;
                         }
-                        vals[base + c1 - offset] -= s;
+                    }
+                } else {
+                    while nbrs[kk] < fi {
+                        kk += 1;
+                    }
+                    debug_assert_eq!(nbrs[kk], fi);
+                    for c2 in 0..cd {
+                        let base = cols[c2] - offset + (cd - c2) + kk * cd;
+                        let w2 = &wj[c2 * pd..(c2 + 1) * pd];
+                        for c1 in 0..cd {
+                            let mut s = 0.0;
+                            for d in 0..pd {
+                                s += yi[c1 * pd + d] * w2[d];
+                            }
+                            vals[base + c1] -= s;
+                        }
                     }
                 }
             }
@@ -1025,6 +1072,16 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
     }
 }
 
+/// One linearization's reduced camera system, apart from its damping: the point blocks'
+/// inverses, the right-hand side and the diagonal the damping scales (cameras, shared
+/// parameters).
+struct Assembled {
+    vinv: Vec<Vec<f64>>,
+    rhs: Mat<f64>,
+    dcam: Vec<f64>,
+    dglob: Vec<f64>,
+}
+
 /// Per-track linearisation: `V_p`, `g_p` and the `W` block of each observation.
 struct TrackLin {
     v: Vec<f64>,
@@ -1151,6 +1208,8 @@ pub fn minimize_shared<M: BundleModel>(
     let mut cam_basis = vec![0.0; nf * cl * cd];
     let mut cam_has_basis = vec![false; nf];
     let mut values = vec![0.0; pattern.nnz()];
+    // The undamped reduced camera system of the current linearization (variable projection).
+    let mut base_values: Vec<f64> = Vec::new();
     // At least one slot per camera so that the per-camera zip below visits every camera.
     let kc = (k * cd).max(1);
     let mut ugf = vec![0.0; nf * kc];
@@ -1347,154 +1406,192 @@ pub fn minimize_shared<M: BundleModel>(
         }
 
         // Damped solves until a step is accepted.
+        let mut assembled: Option<Assembled> = None;
         loop {
             if iterations >= cfg.max_iterations {
                 break 'outer;
             }
             iterations += 1;
-            // Point blocks: V* and its inverse.
-            let vinv: Vec<Vec<f64>> = lins
-                .par_iter()
-                .map(|l| {
-                    let mut h = l.v.clone();
-                    let md = (0..pd).map(|i| h[i * pd + i]).sum::<f64>() / pd as f64;
-                    for i in 0..pd {
-                        let extra = if cfg.damp_points {
-                            lambda * h[i * pd + i].max(1e-9 * md)
-                        } else {
-                            0.0
-                        };
-                        h[i * pd + i] += extra + 1e-12 * md.max(f64::MIN_POSITIVE);
-                    }
-                    let mut inv = vec![0.0; pd * pd];
-                    if linalg::cholesky(&mut h, pd) {
-                        linalg::chol_inverse(&h, pd, &mut inv);
-                    }
-                    inv
-                })
-                .collect();
-            // Reduced camera system.
-            values.iter_mut().for_each(|x| *x = 0.0);
-            let mut rhs = Mat::<f64>::zeros(ns, 1);
-            let mut dcam = vec![0.0; nf * cd];
-            let mut dglob = vec![0.0; k];
-            for k1 in 0..k {
-                for k2 in 0..=k1 {
-                    let mut v = ugg[k1 * k + k2];
-                    if k1 == k2 {
-                        let dd = v.max(dfloor);
-                        dglob[k1] = dd;
-                        v += lambda * dd;
-                    }
-                    values[pattern.glob(nf, k1, k2)] += v;
-                }
-                rhs[(nf * cd + k1, 0)] = -gglob[k1];
-            }
-            for f in 0..nf {
-                let uf = &u[f * cd * cd..(f + 1) * cd * cd];
-                for c1 in 0..cd {
-                    for c2 in 0..=c1 {
-                        let mut v = uf[c1 * cd + c2];
-                        if c1 == c2 {
+            // The reduced camera system. Under variable projection (points not damped)
+            // only its diagonal depends on λ: it is assembled once per linearization
+            // and a rejected step re-solves with the new damping added to a copy.
+            let lambda_s = if cfg.damp_points { lambda } else { 0.0 };
+            if cfg.damp_points || assembled.is_none() {
+                // Point blocks: V* and its inverse.
+                let vinv: Vec<Vec<f64>> = lins
+                    .par_iter()
+                    .map(|l| {
+                        let mut h = l.v.clone();
+                        let md = (0..pd).map(|i| h[i * pd + i]).sum::<f64>() / pd as f64;
+                        for i in 0..pd {
+                            let extra = if cfg.damp_points {
+                                lambda * h[i * pd + i].max(1e-9 * md)
+                            } else {
+                                0.0
+                            };
+                            h[i * pd + i] += extra + 1e-12 * md.max(f64::MIN_POSITIVE);
+                        }
+                        let mut inv = vec![0.0; pd * pd];
+                        if linalg::cholesky(&mut h, pd) {
+                            linalg::chol_inverse(&h, pd, &mut inv);
+                        }
+                        inv
+                    })
+                    .collect();
+                // Reduced camera system.
+                values.iter_mut().for_each(|x| *x = 0.0);
+                let mut rhs = Mat::<f64>::zeros(ns, 1);
+                let mut dcam = vec![0.0; nf * cd];
+                let mut dglob = vec![0.0; k];
+                for k1 in 0..k {
+                    for k2 in 0..=k1 {
+                        let mut v = ugg[k1 * k + k2];
+                        if k1 == k2 {
                             let dd = v.max(dfloor);
-                            dcam[f * cd + c1] = dd;
-                            v += lambda * dd;
+                            dglob[k1] = dd;
+                            v += lambda_s * dd;
                         }
-                        values[pattern.pos(f, f, c1, c2)] += v;
+                        values[pattern.glob(nf, k1, k2)] += v;
                     }
-                    rhs[(f * cd + c1, 0)] = -gc[f * cd + c1];
-                    for k1 in 0..k {
-                        values[pattern.glob_in_cam(f, c1, k1)] += ugf[f * kc + k1 * cd + c1];
-                    }
+                    rhs[(nf * cd + k1, 0)] = -gglob[k1];
                 }
-            }
-            for (f, kf) in &pins {
-                for c1 in 0..cd {
-                    for c2 in 0..=c1 {
-                        values[pattern.pos(*f, *f, c1, c2)] += kf[c1 * cd + c2];
-                    }
-                }
-            }
-            for f in (0..nf).filter(|&f| is_fixed(f)) {
-                for c1 in 0..cd {
-                    values[pattern.pos(f, f, c1, c1)] += 1e8 * mean_diag_u.max(f64::MIN_POSITIVE);
-                    rhs[(f * cd + c1, 0)] = 0.0;
-                }
-            }
-            // S −= W V⁻¹ Wᵀ and rhs += W V⁻¹ g_p, track by track. The columns of frames
-            // a..b are one contiguous run of the CSC values, so the frames are split into
-            // ranges, one per thread, each thread adding every track's share to its own
-            // columns (and to its frames' right-hand sides) in track order: the sums are
-            // those of the sequential loop, whatever the number of threads.
-            // Y_g = W_g V⁻¹ per track (models with shared parameters only): the shared
-            // rows' own block and every range's coupling to them use it.
-            let mut ygs = vec![0.0; np * k * pd];
-            if k > 0 {
-                ygs.par_chunks_mut(k * pd).enumerate().for_each(|(p, yg)| {
-                    let (vi, wg) = (&vinv[p], &lins[p].wg);
-                    for k1 in 0..k {
-                        for d2 in 0..pd {
-                            yg[k1 * pd + d2] =
-                                (0..pd).map(|d1| wg[k1 * pd + d1] * vi[d1 * pd + d2]).sum();
+                for f in 0..nf {
+                    let uf = &u[f * cd * cd..(f + 1) * cd * cd];
+                    for c1 in 0..cd {
+                        for c2 in 0..=c1 {
+                            let mut v = uf[c1 * cd + c2];
+                            if c1 == c2 {
+                                let dd = v.max(dfloor);
+                                dcam[f * cd + c1] = dd;
+                                v += lambda_s * dd;
+                            }
+                            values[pattern.pos(f, f, c1, c2)] += v;
+                        }
+                        rhs[(f * cd + c1, 0)] = -gc[f * cd + c1];
+                        for k1 in 0..k {
+                            values[pattern.glob_in_cam(f, c1, k1)] += ugf[f * kc + k1 * cd + c1];
                         }
                     }
+                }
+                for (f, kf) in &pins {
+                    for c1 in 0..cd {
+                        for c2 in 0..=c1 {
+                            values[pattern.pos(*f, *f, c1, c2)] += kf[c1 * cd + c2];
+                        }
+                    }
+                }
+                for f in (0..nf).filter(|&f| is_fixed(f)) {
+                    for c1 in 0..cd {
+                        values[pattern.pos(f, f, c1, c1)] +=
+                            1e8 * mean_diag_u.max(f64::MIN_POSITIVE);
+                        rhs[(f * cd + c1, 0)] = 0.0;
+                    }
+                }
+                // S −= W V⁻¹ Wᵀ and rhs += W V⁻¹ g_p, track by track. The columns of frames
+                // a..b are one contiguous run of the CSC values, so the frames are split into
+                // ranges, one per thread, each thread adding every track's share to its own
+                // columns (and to its frames' right-hand sides) in track order: the sums are
+                // those of the sequential loop, whatever the number of threads.
+                // Y_g = W_g V⁻¹ per track (models with shared parameters only): the shared
+                // rows' own block and every range's coupling to them use it.
+                let mut ygs = vec![0.0; np * k * pd];
+                if k > 0 {
+                    ygs.par_chunks_mut(k * pd).enumerate().for_each(|(p, yg)| {
+                        let (vi, wg) = (&vinv[p], &lins[p].wg);
+                        for k1 in 0..k {
+                            for d2 in 0..pd {
+                                yg[k1 * pd + d2] =
+                                    (0..pd).map(|d1| wg[k1 * pd + d1] * vi[d1 * pd + d2]).sum();
+                            }
+                        }
+                    });
+                }
+                let cam_end = pattern.col_ptr[nf * cd];
+                let (cam_values, glob_values) = values.split_at_mut(cam_end);
+                let ranges = frame_ranges(&pattern, nf, cd, rayon::current_num_threads());
+                let mut value_parts: Vec<&mut [f64]> = Vec::with_capacity(ranges.len());
+                {
+                    let mut rest: &mut [f64] = cam_values;
+                    let mut at = 0;
+                    for &(_, b) in &ranges {
+                        let end = pattern.col_ptr[b * cd];
+                        let (head, tail) = rest.split_at_mut(end - at);
+                        value_parts.push(head);
+                        rest = tail;
+                        at = end;
+                    }
+                }
+                let rhs_parts: Vec<Vec<f64>> = ranges
+                    .par_iter()
+                    .zip(value_parts.into_par_iter())
+                    .map(|(&(a, b), vals)| {
+                        let offset = pattern.col_ptr[a * cd];
+                        let mut rhs_part = vec![0.0; (b - a) * cd];
+                        schur_columns(
+                            g,
+                            &pattern,
+                            (a, b),
+                            (cd, pd, k),
+                            (&lin, stride),
+                            &lins,
+                            &vinv,
+                            &ygs,
+                            vals,
+                            offset,
+                            &mut rhs_part,
+                        );
+                        rhs_part
+                    })
+                    .collect();
+                for (&(a, _), part) in ranges.iter().zip(&rhs_parts) {
+                    for (i, v) in part.iter().enumerate() {
+                        rhs[(a * cd + i, 0)] += v;
+                    }
+                }
+                if k > 0 {
+                    // The shared rows' own block: S_gg −= Y_g W_gᵀ, rhs_g += Y_g g_p.
+                    for p in 0..np {
+                        let (gp, wg) = (&lins[p].gp, &lins[p].wg);
+                        let yg = &ygs[p * k * pd..(p + 1) * k * pd];
+                        for k1 in 0..k {
+                            let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * gp[d]).sum();
+                            rhs[(nf * cd + k1, 0)] += s;
+                            for k2 in 0..=k1 {
+                                let s: f64 =
+                                    (0..pd).map(|d| yg[k1 * pd + d] * wg[k2 * pd + d]).sum();
+                                glob_values[pattern.glob(nf, k1, k2) - cam_end] -= s;
+                            }
+                        }
+                    }
+                }
+                if !cfg.damp_points {
+                    base_values.clone_from(&values);
+                }
+                assembled = Some(Assembled {
+                    vinv,
+                    rhs,
+                    dcam,
+                    dglob,
                 });
+            } else {
+                values.copy_from_slice(&base_values);
             }
-            let cam_end = pattern.col_ptr[nf * cd];
-            let (cam_values, glob_values) = values.split_at_mut(cam_end);
-            let ranges = frame_ranges(&pattern, nf, cd, rayon::current_num_threads());
-            let mut value_parts: Vec<&mut [f64]> = Vec::with_capacity(ranges.len());
-            {
-                let mut rest: &mut [f64] = cam_values;
-                let mut at = 0;
-                for &(_, b) in &ranges {
-                    let end = pattern.col_ptr[b * cd];
-                    let (head, tail) = rest.split_at_mut(end - at);
-                    value_parts.push(head);
-                    rest = tail;
-                    at = end;
+            let Some(Assembled {
+                vinv,
+                rhs,
+                dcam,
+                dglob,
+            }) = assembled.as_ref()
+            else {
+                unreachable!()
+            };
+            let mut rhs = rhs.clone();
+            if !cfg.damp_points {
+                for (i, d) in dcam.iter().enumerate() {
+                    values[pattern.pos(i / cd, i / cd, i % cd, i % cd)] += lambda * d;
                 }
-            }
-            let rhs_parts: Vec<Vec<f64>> = ranges
-                .par_iter()
-                .zip(value_parts.into_par_iter())
-                .map(|(&(a, b), vals)| {
-                    let offset = pattern.col_ptr[a * cd];
-                    let mut rhs_part = vec![0.0; (b - a) * cd];
-                    schur_columns(
-                        g,
-                        &pattern,
-                        (a, b),
-                        (cd, pd, k),
-                        (&lin, stride),
-                        &lins,
-                        &vinv,
-                        &ygs,
-                        vals,
-                        offset,
-                        &mut rhs_part,
-                    );
-                    rhs_part
-                })
-                .collect();
-            for (&(a, _), part) in ranges.iter().zip(&rhs_parts) {
-                for (i, v) in part.iter().enumerate() {
-                    rhs[(a * cd + i, 0)] += v;
-                }
-            }
-            if k > 0 {
-                // The shared rows' own block: S_gg −= Y_g W_gᵀ, rhs_g += Y_g g_p.
-                for p in 0..np {
-                    let (gp, wg) = (&lins[p].gp, &lins[p].wg);
-                    let yg = &ygs[p * k * pd..(p + 1) * k * pd];
-                    for k1 in 0..k {
-                        let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * gp[d]).sum();
-                        rhs[(nf * cd + k1, 0)] += s;
-                        for k2 in 0..=k1 {
-                            let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * wg[k2 * pd + d]).sum();
-                            glob_values[pattern.glob(nf, k1, k2) - cam_end] -= s;
-                        }
-                    }
+                for (k1, d) in dglob.iter().enumerate() {
+                    values[pattern.glob(nf, k1, k1)] += lambda * d;
                 }
             }
             let mat = SparseColMatRef::new(pattern.symbolic.as_ref(), &values);
@@ -1527,7 +1624,7 @@ pub fn minimize_shared<M: BundleModel>(
                 stride,
                 (cd, pd, k),
                 &lins,
-                &vinv,
+                vinv,
                 |p| &lins[p].gp,
                 &dc,
                 &dg,
@@ -1571,7 +1668,7 @@ pub fn minimize_shared<M: BundleModel>(
                     lin: &lin,
                     stride,
                     lins: &lins,
-                    vinv: &vinv,
+                    vinv,
                     cam_ptr: &cam_ptr,
                     cam_obs: &cam_obs,
                     is_fixed: &is_fixed,
