@@ -10,7 +10,8 @@
 //! results' structure errors.
 //!
 //! `cargo run --release --example sparse_scaling -- [FRAMES ...] [--per-frame K] [--sparse]
-//! [--compare]` (default 1000 2000 5000 10000 20000; K, default 150, sets the density).
+//! [--compare] [--max-solves N]` (default 1000 2000 5000 10000 20000; K, default 150, sets
+//! the density; N caps the adjustment's linear solves, default 100).
 //! The growth exponents are the log–log slopes of time and memory against the number of
 //! observations between the smallest and the largest size.
 
@@ -62,7 +63,7 @@ impl rank3::Observer for Printer {
     }
 }
 
-fn child(frames: usize, per_frame: usize, sparse: bool, compare: bool) {
+fn child(frames: usize, per_frame: usize, sparse: bool, compare: bool, max_solves: Option<usize>) {
     let t0 = Instant::now();
     let (table, truth) = corridor(&CorridorConfig {
         frames,
@@ -77,6 +78,9 @@ fn child(frames: usize, per_frame: usize, sparse: bool, compare: bool) {
     };
     if sparse {
         config.sparse.pipeline = Pipeline::Sparse;
+    }
+    if let Some(n) = max_solves {
+        config.sparse.lm.max_iterations = n;
     }
     let t1 = Instant::now();
     let r = Reconstruction::from_tracks_observed(&table, &config, &mut Printer(Instant::now()))
@@ -144,13 +148,16 @@ fn main() {
     let per_frame = value("--per-frame").unwrap_or(150);
     let (sparse, compare) = (flag("--sparse"), flag("--compare"));
     if let Some(f) = value("--child") {
-        child(f, per_frame, sparse, compare);
+        child(f, per_frame, sparse, compare, value("--max-solves"));
         return;
     }
     let mut sizes: Vec<usize> = args
         .iter()
         .enumerate()
-        .filter(|(i, a)| !a.starts_with("--") && (*i == 0 || args[i - 1] != "--per-frame"))
+        .filter(|(i, a)| {
+            !a.starts_with("--")
+                && (*i == 0 || !["--per-frame", "--max-solves"].contains(&args[i - 1].as_str()))
+        })
         .filter_map(|(_, a)| a.parse().ok())
         .collect();
     if sizes.is_empty() {
@@ -174,6 +181,9 @@ fn main() {
         }
         if compare {
             cmd.arg("--compare");
+        }
+        if let Some(n) = value("--max-solves") {
+            cmd.args(["--max-solves", &n.to_string()]);
         }
         let out = cmd.output().expect("child");
         let text = String::from_utf8_lossy(&out.stdout);

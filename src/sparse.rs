@@ -107,8 +107,14 @@ pub struct SparseConfig {
     /// and the points already placed after the best similarity, for the window to be
     /// chained. Default 0.1 (windows that fit leave 1–3 %).
     pub max_window_mismatch: f64,
-    /// Random restarts of a window's completion when it does not fit. Default 4.
+    /// Random restarts of a window's completion when it ended in a local minimum (see
+    /// `window_rms_ratio`). Default 4.
     pub window_restarts: usize,
+    /// A window whose completion's RMS exceeds this many times the median window's is
+    /// taken for a local minimum and completed again from random starts. Default 1.5
+    /// (windows at the optimum are within 5 % of the median on the synthetic corridors;
+    /// local minima 2.5×).
+    pub window_rms_ratio: f64,
 }
 
 impl Default for SparseConfig {
@@ -128,6 +134,7 @@ impl Default for SparseConfig {
             min_outlier_px: 2.0,
             max_window_mismatch: 0.1,
             window_restarts: 4,
+            window_rms_ratio: 1.5,
         }
     }
 }
@@ -360,15 +367,17 @@ impl SparseProblem {
     /// The windowed metric start: cameras (12 per frame, see [`ScaledOrthographic`]) and
     /// points (3 per track).
     ///
-    /// Each window of frames is completed (dense damped Wiberg, small), upgraded to metric
-    /// on its own ([`crate::metric::upgrade`]) and mapped into window 0's frame by the
+    /// Each window of frames is completed (dense damped Wiberg, small; the windows in
+    /// parallel), upgraded to metric on its own ([`crate::metric::upgrade`]); a window whose
+    /// completion ended in a local minimum (its RMS over
+    /// [`SparseConfig::window_rms_ratio`] times the median window's) is completed again from
+    /// up to [`SparseConfig::window_restarts`] random starts. Then, in order, each window is
+    /// mapped into window 0's frame by the
     /// similarity `X = c A x + b` (reflection allowed: each window has its own depth
     /// reversal) that best carries its points onto the tracks already placed (Umeyama,
     /// ≥ 4 shared tracks). A window whose similarity leaves the shared points off by more
-    /// than [`SparseConfig::max_window_mismatch`] of their spread (its completion fell into
-    /// a local minimum, or its motion is too weak for its own metric upgrade) is completed
-    /// again from [`SparseConfig::window_restarts`] random starts; if it still does not fit
-    /// it is skipped and counted: when the next window begins at or before its first frame
+    /// than [`SparseConfig::max_window_mismatch`] of their spread (its motion is too weak
+    /// for its own metric upgrade, or no start found its optimum) is skipped and counted: when the next window begins at or before its first frame
     /// not yet placed, that window places its frames; otherwise its new frames are bridged
     /// by an affine map onto the placed points (`affine_bridge`, only approximately
     /// metric). The similarity is anchored on the shared tracks seen in at least
@@ -657,10 +666,11 @@ fn start_windows(
             metric_window(*start, *end, tracks, meas, &cfg.window, camera)
         })
         .collect();
+    let fitted = restart_poor_windows(&windows, fitted, cfg, camera);
     for (wi, ((start, end, tracks, meas), window)) in windows.iter().zip(fitted).enumerate() {
         let (start, end, tracks) = (*start, *end, tracks.as_slice());
         let seen = windowed::seen_in_window(meas, tracks.len());
-        let mut window = match window {
+        let window = match window {
             Ok(w) => w,
             Err(e) if first => return Err(e),
             Err(_) => {
@@ -688,28 +698,7 @@ fn start_windows(
                 let est: Vec<_> = shared.iter().map(|&k| w.points[k]).collect();
                 crate::eval::align_similarity(&est, &glob, true)
             };
-            let mut al = align(&window);
-            if al
-                .as_ref()
-                .is_none_or(|a| !(a.relative_rms <= cfg.max_window_mismatch))
-                && cfg.window_restarts > 0
-            {
-                let mut wc = cfg.window.clone();
-                wc.completion.runs = 1 + cfg.window_restarts;
-                wc.completion.seed = start as u64;
-                if let Ok(w2) = metric_window(start, end, tracks, meas, &wc, camera) {
-                    let al2 = align(&w2);
-                    let better = match (&al, &al2) {
-                        (_, None) => false,
-                        (None, Some(_)) => true,
-                        (Some(a), Some(b)) => b.relative_rms < a.relative_rms,
-                    };
-                    if better {
-                        window = w2;
-                        al = al2;
-                    }
-                }
-            }
+            let al = align(&window);
             al.filter(|a| a.relative_rms <= cfg.max_window_mismatch)
                 .map(|a| (a.scale, a.rotation, a.translation))
         };
@@ -775,6 +764,61 @@ fn start_windows(
         )));
     }
     Ok((cams, pts, skipped))
+}
+
+/// The windows whose completion ended in a local minimum — an RMS over
+/// [`SparseConfig::window_rms_ratio`] times the median window's (every window sees the same
+/// noise), or no fit at all — are completed again from random starts, the windows in
+/// parallel, one start at a time until one reaches that level (at most
+/// [`SparseConfig::window_restarts`]); the best fit is kept. Measured on a 2 000-frame
+/// corridor: 6 of 99 windows ended at 2.5× the median RMS and did not chain; a random start
+/// brought five back to it (docs/results.md).
+fn restart_poor_windows(
+    windows: &[windowed::Window],
+    fitted: Vec<Result<MetricWindow>>,
+    cfg: &SparseConfig,
+    camera: CameraModel,
+) -> Vec<Result<MetricWindow>> {
+    let mut rms: Vec<f64> = fitted
+        .iter()
+        .filter_map(|w| w.as_ref().ok().map(|w| w.affine.rms))
+        .filter(|r| r.is_finite())
+        .collect();
+    if rms.is_empty() || cfg.window_restarts == 0 {
+        return fitted;
+    }
+    let mid = rms.len() / 2;
+    let (_, median, _) = rms.select_nth_unstable_by(mid, f64::total_cmp);
+    let target = cfg.window_rms_ratio * *median;
+    fitted
+        .into_par_iter()
+        .zip(windows.par_iter())
+        .map(|(fit, (start, end, tracks, meas))| {
+            if fit.as_ref().is_ok_and(|w| w.affine.rms <= target) {
+                return fit;
+            }
+            let mut best = fit;
+            for r in 0..cfg.window_restarts {
+                let mut wc = cfg.window.clone();
+                wc.completion.init = crate::completion::Init::Random;
+                wc.completion.runs = 1;
+                wc.completion.seed = ((*start as u64) << 8) ^ r as u64;
+                let Ok(w) = metric_window(*start, *end, tracks, meas, &wc, camera) else {
+                    continue;
+                };
+                let reached = w.affine.rms <= target;
+                if best.as_ref().is_err()
+                    || best.as_ref().is_ok_and(|b| w.affine.rms < b.affine.rms)
+                {
+                    best = Ok(w);
+                }
+                if reached {
+                    break;
+                }
+            }
+            best
+        })
+        .collect()
 }
 
 /// A window whose own metric reconstruction does not fit the points already placed
@@ -1013,4 +1057,62 @@ pub fn fit(
             note: None,
         },
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{CorridorConfig, corridor};
+
+    /// A window left in a local minimum (its completion stopped after one iteration from a
+    /// random start) is found by its RMS against the other windows' and completed again to
+    /// their level; the windows at their optimum are kept as they are.
+    #[test]
+    fn a_window_in_a_local_minimum_is_completed_again() {
+        let (table, _) = corridor(&CorridorConfig {
+            frames: 100,
+            ..CorridorConfig::default()
+        })
+        .unwrap();
+        let camera = CameraModel::ScaledOrthographic;
+        let prob = SparseProblem::new(&table, true);
+        let cfg = SparseConfig::default();
+        let windows = windowed::collect_windows(&prob.graph, &cfg.window).unwrap();
+        assert!(windows.len() >= 4);
+        let fit =
+            |w: &windowed::Window, c: &WindowConfig| metric_window(w.0, w.1, &w.2, &w.3, c, camera);
+        let mut fitted: Vec<_> = windows.iter().map(|w| fit(w, &cfg.window)).collect();
+        let rms: Vec<f64> = fitted
+            .iter()
+            .map(|w| w.as_ref().unwrap().affine.rms)
+            .collect();
+        let (lo, hi) = rms
+            .iter()
+            .fold((f64::MAX, 0.0f64), |(a, b), &r| (a.min(r), b.max(r)));
+        assert!(hi < 1.2 * lo, "windows at their optimum: RMS {rms:?}");
+        let mut spoil = cfg.window.clone();
+        spoil.completion.init = crate::completion::Init::Random;
+        spoil.completion.max_iterations = 1;
+        spoil.completion.seed = 7;
+        fitted[2] = fit(&windows[2], &spoil);
+        if let Ok(w) = &fitted[2] {
+            assert!(
+                w.affine.rms > 3.0 * hi,
+                "spoiled window: RMS {}",
+                w.affine.rms
+            );
+        }
+        let out = restart_poor_windows(&windows, fitted, &cfg, camera);
+        for (i, w) in out.iter().enumerate() {
+            let r = w.as_ref().unwrap().affine.rms;
+            if i == 2 {
+                assert!(
+                    r <= cfg.window_rms_ratio * hi,
+                    "window 2 completed again: RMS {r}"
+                );
+            } else {
+                assert_eq!(r, rms[i], "window {i} kept");
+            }
+        }
+    }
 }
