@@ -10,8 +10,9 @@
 //! results' structure errors.
 //!
 //! `cargo run --release --example sparse_scaling -- [FRAMES ...] [--per-frame K] [--sparse]
-//! [--compare] [--max-solves N]` (default 1000 2000 5000 10000 20000; K, default 150, sets
-//! the density; N caps the adjustment's linear solves, default 100).
+//! [--compare] [--max-solves N] [--window-tolerance T]` (default 1000 2000 5000 10000
+//! 20000; K, default 150, sets the density; N caps the adjustment's linear solves, default
+//! 100; T is the windows' completion tolerance, default 1e-4).
 //! The growth exponents are the log–log slopes of time and memory against the number of
 //! observations between the smallest and the largest size.
 
@@ -63,7 +64,14 @@ impl rank3::Observer for Printer {
     }
 }
 
-fn child(frames: usize, per_frame: usize, sparse: bool, compare: bool, max_solves: Option<usize>) {
+fn child(
+    frames: usize,
+    per_frame: usize,
+    sparse: bool,
+    compare: bool,
+    max_solves: Option<usize>,
+    window_tolerance: Option<f64>,
+) {
     let t0 = Instant::now();
     let (table, truth) = corridor(&CorridorConfig {
         frames,
@@ -78,6 +86,9 @@ fn child(frames: usize, per_frame: usize, sparse: bool, compare: bool, max_solve
     };
     if sparse {
         config.sparse.pipeline = Pipeline::Sparse;
+    }
+    if let Some(t) = window_tolerance {
+        config.sparse.window.completion.function_tolerance = t;
     }
     if let Some(n) = max_solves {
         config.sparse.lm.max_iterations = n;
@@ -148,7 +159,12 @@ fn main() {
     let per_frame = value("--per-frame").unwrap_or(150);
     let (sparse, compare) = (flag("--sparse"), flag("--compare"));
     if let Some(f) = value("--child") {
-        child(f, per_frame, sparse, compare, value("--max-solves"));
+        let tol = args
+            .iter()
+            .position(|a| a == "--window-tolerance")
+            .and_then(|i| args.get(i + 1))
+            .and_then(|v| v.parse::<f64>().ok());
+        child(f, per_frame, sparse, compare, value("--max-solves"), tol);
         return;
     }
     let mut sizes: Vec<usize> = args
@@ -156,7 +172,9 @@ fn main() {
         .enumerate()
         .filter(|(i, a)| {
             !a.starts_with("--")
-                && (*i == 0 || !["--per-frame", "--max-solves"].contains(&args[i - 1].as_str()))
+                && (*i == 0
+                    || !["--per-frame", "--max-solves", "--window-tolerance"]
+                        .contains(&args[i - 1].as_str()))
         })
         .filter_map(|(_, a)| a.parse().ok())
         .collect();
@@ -182,8 +200,10 @@ fn main() {
         if compare {
             cmd.arg("--compare");
         }
-        if let Some(n) = value("--max-solves") {
-            cmd.args(["--max-solves", &n.to_string()]);
+        for flag in ["--max-solves", "--window-tolerance"] {
+            if let Some(i) = args.iter().position(|a| a == flag) {
+                cmd.args(&args[i..(i + 2).min(args.len())]);
+            }
         }
         let out = cmd.output().expect("child");
         let text = String::from_utf8_lossy(&out.stdout);
