@@ -12,7 +12,9 @@
 //! `cargo run --release --example sparse_scaling -- [FRAMES ...] [--per-frame K] [--sparse]
 //! [--compare] [--max-solves N] [--window-tolerance T]` (default 1000 2000 5000 10000
 //! 20000; K, default 150, sets the density; N caps the adjustment's linear solves, default
-//! 100; T is the windows' completion tolerance, default 1e-4).
+//! 100; T is the windows' completion tolerance, default 1e-4; `--tail-tolerance X` sets
+//! `LmConfig::window_relative_tolerance`, default 1e-6). `--from-truth` also runs the
+//! adjustment started at the true cameras and points.
 //! The growth exponents are the log–log slopes of time and memory against the number of
 //! observations between the smallest and the largest size.
 
@@ -71,6 +73,8 @@ fn child(
     compare: bool,
     max_solves: Option<usize>,
     window_tolerance: Option<f64>,
+    tail_tolerance: Option<f64>,
+    from_truth: bool,
 ) {
     let t0 = Instant::now();
     let (table, truth) = corridor(&CorridorConfig {
@@ -89,6 +93,9 @@ fn child(
     }
     if let Some(t) = window_tolerance {
         config.sparse.window.completion.function_tolerance = t;
+    }
+    if let Some(t) = tail_tolerance {
+        config.sparse.lm.window_relative_tolerance = t;
     }
     if let Some(n) = max_solves {
         config.sparse.lm.max_iterations = n;
@@ -145,6 +152,58 @@ fn child(
     for w in r.warnings.iter().skip(1) {
         println!("        warning: {w}");
     }
+    if from_truth {
+        adjust_from_truth(&table, &truth, &config);
+    }
+}
+
+/// The accuracy floor: the same adjustment started at the true cameras and points (the
+/// tracks the pipeline would fit: ≥ 2 frames each, ≥ 4 per frame). Prints its solves, RMS
+/// and structure error.
+fn adjust_from_truth(table: &rank3::TrackTable, truth: &rank3::MetricModel, config: &Config) {
+    let (kept, _, frames, tracks) = table.set_aside(2, 4);
+    let prob = rank3::sparse::SparseProblem::new(&kept, true);
+    let mut cams = vec![0.0; 12 * frames.len()];
+    for (c, &f) in cams.chunks_exact_mut(12).zip(&frames) {
+        let r = truth.rotations[f].matrix();
+        for i in 0..3 {
+            for j in 0..3 {
+                c[3 * i + j] = r[(i, j)];
+            }
+        }
+        c[9] = truth.scales[f] / prob.scale;
+        c[10] = (truth.translations[f][0] - prob.centre[0]) / prob.scale;
+        c[11] = (truth.translations[f][1] - prob.centre[1]) / prob.scale;
+    }
+    let mut pts: Vec<f64> = tracks
+        .iter()
+        .flat_map(|&p| truth.points[p].iter().copied().collect::<Vec<_>>())
+        .collect();
+    let t0 = Instant::now();
+    let lm = prob
+        .adjust(
+            &mut cams,
+            &mut pts,
+            &config.sparse,
+            rank3::CameraModel::ScaledOrthographic,
+            0,
+            &mut Printer(Instant::now()),
+        )
+        .expect("adjustment from the truth");
+    let est: Vec<_> = pts
+        .chunks_exact(3)
+        .map(|x| nalgebra::Vector3::new(x[0], x[1], x[2]))
+        .collect();
+    let tru: Vec<_> = tracks.iter().map(|&p| truth.points[p]).collect();
+    let n_res = 2.0 * kept.n_observed() as f64;
+    println!(
+        "        from the truth: {} solves ({:?}), {:.2} s, RMS {:.10} px, structure {:.3} %",
+        lm.report.iterations,
+        lm.report.status,
+        t0.elapsed().as_secs_f64(),
+        (lm.report.final_cost / n_res).sqrt() * prob.scale,
+        100.0 * eval::structure_error(&est, &tru)
+    );
 }
 
 fn main() {
@@ -159,12 +218,22 @@ fn main() {
     let per_frame = value("--per-frame").unwrap_or(150);
     let (sparse, compare) = (flag("--sparse"), flag("--compare"));
     if let Some(f) = value("--child") {
-        let tol = args
-            .iter()
-            .position(|a| a == "--window-tolerance")
-            .and_then(|i| args.get(i + 1))
-            .and_then(|v| v.parse::<f64>().ok());
-        child(f, per_frame, sparse, compare, value("--max-solves"), tol);
+        let real = |name: &str| {
+            args.iter()
+                .position(|a| a == name)
+                .and_then(|i| args.get(i + 1))
+                .and_then(|v| v.parse::<f64>().ok())
+        };
+        child(
+            f,
+            per_frame,
+            sparse,
+            compare,
+            value("--max-solves"),
+            real("--window-tolerance"),
+            real("--tail-tolerance"),
+            flag("--from-truth"),
+        );
         return;
     }
     let mut sizes: Vec<usize> = args
@@ -173,8 +242,13 @@ fn main() {
         .filter(|(i, a)| {
             !a.starts_with("--")
                 && (*i == 0
-                    || !["--per-frame", "--max-solves", "--window-tolerance"]
-                        .contains(&args[i - 1].as_str()))
+                    || ![
+                        "--per-frame",
+                        "--max-solves",
+                        "--window-tolerance",
+                        "--tail-tolerance",
+                    ]
+                    .contains(&args[i - 1].as_str()))
         })
         .filter_map(|(_, a)| a.parse().ok())
         .collect();
@@ -200,7 +274,10 @@ fn main() {
         if compare {
             cmd.arg("--compare");
         }
-        for flag in ["--max-solves", "--window-tolerance"] {
+        if flag("--from-truth") {
+            cmd.arg("--from-truth");
+        }
+        for flag in ["--max-solves", "--window-tolerance", "--tail-tolerance"] {
             if let Some(i) = args.iter().position(|a| a == flag) {
                 cmd.args(&args[i..(i + 2).min(args.len())]);
             }
