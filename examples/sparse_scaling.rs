@@ -66,16 +66,16 @@ impl rank3::Observer for Printer {
     }
 }
 
-fn child(
-    frames: usize,
-    per_frame: usize,
-    sparse: bool,
-    compare: bool,
+/// The settings a run can change (`--max-solves`, `--window-tolerance`, `--tail-tolerance`,
+/// `--from-truth`).
+struct Tuning {
     max_solves: Option<usize>,
     window_tolerance: Option<f64>,
     tail_tolerance: Option<f64>,
     from_truth: bool,
-) {
+}
+
+fn child(frames: usize, per_frame: usize, sparse: bool, compare: bool, tuning: &Tuning) {
     let t0 = Instant::now();
     let (table, truth) = corridor(&CorridorConfig {
         frames,
@@ -91,13 +91,13 @@ fn child(
     if sparse {
         config.sparse.pipeline = Pipeline::Sparse;
     }
-    if let Some(t) = window_tolerance {
+    if let Some(t) = tuning.window_tolerance {
         config.sparse.window.completion.function_tolerance = t;
     }
-    if let Some(t) = tail_tolerance {
+    if let Some(t) = tuning.tail_tolerance {
         config.sparse.lm.window_relative_tolerance = t;
     }
-    if let Some(n) = max_solves {
+    if let Some(n) = tuning.max_solves {
         config.sparse.lm.max_iterations = n;
     }
     let t1 = Instant::now();
@@ -152,7 +152,7 @@ fn child(
     for w in r.warnings.iter().skip(1) {
         println!("        warning: {w}");
     }
-    if from_truth {
+    if tuning.from_truth {
         adjust_from_truth(&table, &truth, &config);
     }
 }
@@ -224,16 +224,13 @@ fn main() {
                 .and_then(|i| args.get(i + 1))
                 .and_then(|v| v.parse::<f64>().ok())
         };
-        child(
-            f,
-            per_frame,
-            sparse,
-            compare,
-            value("--max-solves"),
-            real("--window-tolerance"),
-            real("--tail-tolerance"),
-            flag("--from-truth"),
-        );
+        let tuning = Tuning {
+            max_solves: value("--max-solves"),
+            window_tolerance: real("--window-tolerance"),
+            tail_tolerance: real("--tail-tolerance"),
+            from_truth: flag("--from-truth"),
+        };
+        child(f, per_frame, sparse, compare, &tuning);
         return;
     }
     let mut sizes: Vec<usize> = args
