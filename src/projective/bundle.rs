@@ -626,52 +626,59 @@ fn frame_ranges(pattern: &Pattern, nf: usize, cd: usize, parts: usize) -> Vec<(u
 /// copies of the loops with the sizes known at compile time (unrolled and vectorized: the
 /// adjustment of a 2 000-frame corridor, 19 solves, 13.6 → 7.9 s, docs/results.md); other
 /// sizes take the general loops.
-#[allow(clippy::too_many_arguments)]
 fn schur_columns(
-    g: &Graph,
-    pattern: &Pattern,
+    inp: &SchurInput<'_>,
     range: (usize, usize),
-    dims: (usize, usize, usize),
-    lin: (&[f64], usize),
-    lins: &[TrackLin],
-    vinv: &[Vec<f64>],
-    ygs: &[f64],
     vals: &mut [f64],
     offset: usize,
     rhs: &mut [f64],
 ) {
     macro_rules! sized {
         ($($c:literal),*) => {
-            match (dims.0, dims.1) {
-                $(($c, 3) => schur_columns_sized::<$c, 3>(
-                    g, pattern, range, dims, lin, lins, vinv, ygs, vals, offset, rhs,
-                ),)*
-                _ => schur_columns_sized::<0, 0>(
-                    g, pattern, range, dims, lin, lins, vinv, ygs, vals, offset, rhs,
-                ),
+            match (inp.dims.0, inp.dims.1) {
+                $(($c, 3) => schur_columns_sized::<$c, 3>(inp, range, vals, offset, rhs),)*
+                _ => schur_columns_sized::<0, 0>(inp, range, vals, offset, rhs),
             }
         };
     }
     sized!(5, 6, 7, 11, 12)
 }
 
+/// What every range of [`schur_columns`] reads: the graph and the system's pattern, the
+/// sizes `(c, d, k)`, the per-observation blocks `lin` (`stride` values each), the tracks'
+/// linearizations, their `V⁻¹` and `Y_g`.
+#[derive(Clone, Copy)]
+struct SchurInput<'a> {
+    g: &'a Graph,
+    pattern: &'a Pattern,
+    dims: (usize, usize, usize),
+    lin: &'a [f64],
+    stride: usize,
+    lins: &'a [TrackLin],
+    vinv: &'a [Vec<f64>],
+    ygs: &'a [f64],
+}
+
 /// [`schur_columns`] with the camera and point tangent sizes `CD`, `PD` fixed at compile
 /// time (`0`: read from `dims` at run time).
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn schur_columns_sized<const CD: usize, const PD: usize>(
-    g: &Graph,
-    pattern: &Pattern,
+    inp: &SchurInput<'_>,
     (a, b): (usize, usize),
-    (cd_rt, pd_rt, k): (usize, usize, usize),
-    (lin, stride): (&[f64], usize),
-    lins: &[TrackLin],
-    vinv: &[Vec<f64>],
-    ygs: &[f64],
     vals: &mut [f64],
     offset: usize,
     rhs: &mut [f64],
 ) {
+    let SchurInput {
+        g,
+        pattern,
+        dims: (cd_rt, pd_rt, k),
+        lin,
+        stride,
+        lins,
+        vinv,
+        ygs,
+    } = *inp;
     let cd = if CD > 0 { CD } else { cd_rt };
     let pd = if PD > 0 { PD } else { pd_rt };
     let mut ys: Vec<f64> = Vec::new();
@@ -1412,10 +1419,10 @@ pub fn minimize_shared<M: BundleModel>(
                 break 'outer;
             }
             iterations += 1;
-            // The reduced camera system. Under variable projection (points not damped)
-            // only its diagonal depends on λ: it is assembled once per linearization
-            // and a rejected step re-solves with the new damping added to a copy.
-            let lambda_s = if cfg.damp_points { lambda } else { 0.0 };
+            // The reduced camera system, undamped; the damping `λD` of the cameras and
+            // shared parameters is added below. Under variable projection (points not
+            // damped) nothing else depends on λ: the system is assembled once per
+            // linearization and a rejected step re-solves a copy with the new damping.
             if cfg.damp_points || assembled.is_none() {
                 // Point blocks: V* and its inverse.
                 let vinv: Vec<Vec<f64>> = lins
@@ -1445,11 +1452,9 @@ pub fn minimize_shared<M: BundleModel>(
                 let mut dglob = vec![0.0; k];
                 for k1 in 0..k {
                     for k2 in 0..=k1 {
-                        let mut v = ugg[k1 * k + k2];
+                        let v = ugg[k1 * k + k2];
                         if k1 == k2 {
-                            let dd = v.max(dfloor);
-                            dglob[k1] = dd;
-                            v += lambda_s * dd;
+                            dglob[k1] = v.max(dfloor);
                         }
                         values[pattern.glob(nf, k1, k2)] += v;
                     }
@@ -1459,11 +1464,9 @@ pub fn minimize_shared<M: BundleModel>(
                     let uf = &u[f * cd * cd..(f + 1) * cd * cd];
                     for c1 in 0..cd {
                         for c2 in 0..=c1 {
-                            let mut v = uf[c1 * cd + c2];
+                            let v = uf[c1 * cd + c2];
                             if c1 == c2 {
-                                let dd = v.max(dfloor);
-                                dcam[f * cd + c1] = dd;
-                                v += lambda_s * dd;
+                                dcam[f * cd + c1] = v.max(dfloor);
                             }
                             values[pattern.pos(f, f, c1, c2)] += v;
                         }
@@ -1521,25 +1524,23 @@ pub fn minimize_shared<M: BundleModel>(
                         at = end;
                     }
                 }
+                let schur_input = SchurInput {
+                    g,
+                    pattern: &pattern,
+                    dims: (cd, pd, k),
+                    lin: &lin,
+                    stride,
+                    lins: &lins,
+                    vinv: &vinv,
+                    ygs: &ygs,
+                };
                 let rhs_parts: Vec<Vec<f64>> = ranges
                     .par_iter()
                     .zip(value_parts.into_par_iter())
                     .map(|(&(a, b), vals)| {
                         let offset = pattern.col_ptr[a * cd];
                         let mut rhs_part = vec![0.0; (b - a) * cd];
-                        schur_columns(
-                            g,
-                            &pattern,
-                            (a, b),
-                            (cd, pd, k),
-                            (&lin, stride),
-                            &lins,
-                            &vinv,
-                            &ygs,
-                            vals,
-                            offset,
-                            &mut rhs_part,
-                        );
+                        schur_columns(&schur_input, (a, b), vals, offset, &mut rhs_part);
                         rhs_part
                     })
                     .collect();
@@ -1586,13 +1587,11 @@ pub fn minimize_shared<M: BundleModel>(
                 unreachable!()
             };
             let mut rhs = rhs.clone();
-            if !cfg.damp_points {
-                for (i, d) in dcam.iter().enumerate() {
-                    values[pattern.pos(i / cd, i / cd, i % cd, i % cd)] += lambda * d;
-                }
-                for (k1, d) in dglob.iter().enumerate() {
-                    values[pattern.glob(nf, k1, k1)] += lambda * d;
-                }
+            for (i, d) in dcam.iter().enumerate() {
+                values[pattern.pos(i / cd, i / cd, i % cd, i % cd)] += lambda * d;
+            }
+            for (k1, d) in dglob.iter().enumerate() {
+                values[pattern.glob(nf, k1, k1)] += lambda * d;
             }
             let mat = SparseColMatRef::new(pattern.symbolic.as_ref(), &values);
             let llt = match Llt::try_new_with_symbolic(pattern.llt.clone(), mat, Side::Lower) {
