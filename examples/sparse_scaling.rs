@@ -163,22 +163,7 @@ fn child(frames: usize, per_frame: usize, sparse: bool, compare: bool, tuning: &
 fn adjust_from_truth(table: &rank3::TrackTable, truth: &rank3::MetricModel, config: &Config) {
     let (kept, _, frames, tracks) = table.set_aside(2, 4);
     let prob = rank3::sparse::SparseProblem::new(&kept, true);
-    let mut cams = vec![0.0; 12 * frames.len()];
-    for (c, &f) in cams.chunks_exact_mut(12).zip(&frames) {
-        let r = truth.rotations[f].matrix();
-        for i in 0..3 {
-            for j in 0..3 {
-                c[3 * i + j] = r[(i, j)];
-            }
-        }
-        c[9] = truth.scales[f] / prob.scale;
-        c[10] = (truth.translations[f][0] - prob.centre[0]) / prob.scale;
-        c[11] = (truth.translations[f][1] - prob.centre[1]) / prob.scale;
-    }
-    let mut pts: Vec<f64> = tracks
-        .iter()
-        .flat_map(|&p| truth.points[p].iter().copied().collect::<Vec<_>>())
-        .collect();
+    let (mut cams, mut pts) = prob.cams_and_points(truth, &frames, &tracks);
     let t0 = Instant::now();
     let lm = prob
         .adjust(
@@ -206,28 +191,30 @@ fn adjust_from_truth(table: &rank3::TrackTable, truth: &rank3::MetricModel, conf
     );
 }
 
+/// The flags that take a value (passed on to each child process as given).
+const VALUE_FLAGS: [&str; 4] = [
+    "--per-frame",
+    "--max-solves",
+    "--window-tolerance",
+    "--tail-tolerance",
+];
+
+/// The value after flag `name` in `args`, parsed.
+fn value<T: std::str::FromStr>(args: &[String], name: &str) -> Option<T> {
+    let i = args.iter().position(|a| a == name)?;
+    args.get(i + 1)?.parse().ok()
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let flag = |name: &str| args.iter().any(|a| a == name);
-    let value = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .and_then(|v| v.parse::<usize>().ok())
-    };
-    let per_frame = value("--per-frame").unwrap_or(150);
+    let per_frame = value(&args, "--per-frame").unwrap_or(150);
     let (sparse, compare) = (flag("--sparse"), flag("--compare"));
-    if let Some(f) = value("--child") {
-        let real = |name: &str| {
-            args.iter()
-                .position(|a| a == name)
-                .and_then(|i| args.get(i + 1))
-                .and_then(|v| v.parse::<f64>().ok())
-        };
+    if let Some(f) = value(&args, "--child") {
         let tuning = Tuning {
-            max_solves: value("--max-solves"),
-            window_tolerance: real("--window-tolerance"),
-            tail_tolerance: real("--tail-tolerance"),
+            max_solves: value(&args, "--max-solves"),
+            window_tolerance: value(&args, "--window-tolerance"),
+            tail_tolerance: value(&args, "--tail-tolerance"),
             from_truth: flag("--from-truth"),
         };
         child(f, per_frame, sparse, compare, &tuning);
@@ -237,15 +224,7 @@ fn main() {
         .iter()
         .enumerate()
         .filter(|(i, a)| {
-            !a.starts_with("--")
-                && (*i == 0
-                    || ![
-                        "--per-frame",
-                        "--max-solves",
-                        "--window-tolerance",
-                        "--tail-tolerance",
-                    ]
-                    .contains(&args[i - 1].as_str()))
+            !a.starts_with("--") && (*i == 0 || !VALUE_FLAGS.contains(&args[i - 1].as_str()))
         })
         .filter_map(|(_, a)| a.parse().ok())
         .collect();
@@ -259,23 +238,14 @@ fn main() {
     let mut points = Vec::new();
     for &f in &sizes {
         let mut cmd = Command::new(&exe);
-        cmd.args([
-            "--child",
-            &f.to_string(),
-            "--per-frame",
-            &per_frame.to_string(),
-        ]);
-        if sparse {
-            cmd.arg("--sparse");
+        cmd.args(["--child", &f.to_string()]);
+        for name in ["--sparse", "--compare", "--from-truth"] {
+            if flag(name) {
+                cmd.arg(name);
+            }
         }
-        if compare {
-            cmd.arg("--compare");
-        }
-        if flag("--from-truth") {
-            cmd.arg("--from-truth");
-        }
-        for flag in ["--max-solves", "--window-tolerance", "--tail-tolerance"] {
-            if let Some(i) = args.iter().position(|a| a == flag) {
+        for name in VALUE_FLAGS {
+            if let Some(i) = args.iter().position(|a| a == name) {
                 cmd.args(&args[i..(i + 2).min(args.len())]);
             }
         }
