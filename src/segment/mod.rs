@@ -653,23 +653,19 @@ fn segment_tracks<R: Rng + ?Sized>(
         Objects::Count(k) => k,
         Objects::Auto => best.chosen.len(),
     };
-    if cfg.spectral
-        && matches!(cfg.objects, Objects::Auto)
-        && cfg.eigengap > 0.0
-        && cfg.eigengap <= 1.0
-    {
+    let mut spectral_result: Option<DescentResult> = None;
+    if cfg.spectral {
         let sigma2 = crate::eval::median(&pool.sigma2[..n_sampled]).max(info.sigma2_floor);
-        if let Some((k_gap, gap)) =
-            eigengap_count(&info, &pool, n_sampled, &eligible, sigma2, cfg.max_objects)
+        if matches!(cfg.objects, Objects::Auto)
+            && cfg.eigengap > 0.0
+            && cfg.eigengap <= 1.0
+            && let Some((k_gap, gap)) =
+                eigengap_count(&info, &pool, n_sampled, &eligible, sigma2, cfg.max_objects)
             && gap >= cfg.eigengap
             && k_gap > count
         {
             count = k_gap;
         }
-    }
-    let mut spectral_result: Option<DescentResult> = None;
-    if cfg.spectral {
-        let sigma2 = crate::eval::median(&pool.sigma2[..n_sampled]).max(info.sigma2_floor);
         let groups = (count >= 2)
             .then(|| spectral_groups(&info, &pool, &eligible, count, sigma2, cfg, rng))
             .flatten()
