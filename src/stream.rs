@@ -449,10 +449,7 @@ impl<S: ObservationSource + ?Sized> Reader<'_, S> {
                 });
                 self.passes += 1;
                 self.read_seconds += t0.elapsed().as_secs_f64();
-                let n = r?.observations;
-                if alien || n != self.observations || sum != self.checksum {
-                    return Err(self.changed(n));
-                }
+                self.same_as_first(alien, r?.observations, sum)?;
             }
         }
         match dup {
@@ -461,17 +458,22 @@ impl<S: ObservationSource + ?Sized> Reader<'_, S> {
         }
     }
 
-    /// The error for a source that changed between passes (`n` observations now).
-    fn changed(&self, n: usize) -> Error {
+    /// Whether a later pass read what the first one did: no id the first pass did not see
+    /// (`alien`), as many observations (`n`) and the same sum of [`fingerprint`]s (`sum`);
+    /// otherwise the error of a source that changed between passes, naming the file.
+    fn same_as_first(&self, alien: bool, n: usize, sum: u64) -> Result<()> {
+        if !alien && n == self.observations && sum == self.checksum {
+            return Ok(());
+        }
         let message = format!(
             "the file changed while it was read: {} observations on the first pass, {n} on \
              pass {} (or other ids or values)",
             self.observations, self.passes
         );
-        match self.source.path() {
+        Err(match self.source.path() {
             Some(path) => Error::io(path, std::io::Error::other(message)),
             None => Error::InvalidModel(message),
-        }
+        })
     }
 
     /// The error for a (frame, track) pair given twice: one more pass finds both lines
@@ -1074,9 +1076,7 @@ fn structure_sums<S: ObservationSource + ?Sized>(
                     Ok(())
                 })?
                 .observations;
-            if alien || n != reader.observations || sum != reader.checksum {
-                return Err(reader.changed(n));
-            }
+            reader.same_as_first(alien, n, sum)?;
         }
     }
     Ok(sums)
