@@ -57,9 +57,11 @@
 //! dimension `c` and point dimension `d`: linearisation `O(n_obs (c + d) m)`; forming `S`
 //! `O(Σ_p k_p² c² d)`; its factorisation depends on the fill of the camera graph —
 //! `O(F b² c³)` for a banded graph of half-bandwidth `b` (a video), `O((cF)³)` only when
-//! every frame shares tracks with every other. Memory: `O(n_obs (c d + m c))` for the `W`
-//! blocks and camera Jacobians (57 numbers per observation for the projective model) plus
-//! the non-zeros of `S` and of its factor; nothing is `O(F·N)`. Tracks are linearised in
+//! every frame shares tracks with every other. Memory: `O(n_obs m (c + d))` for the
+//! residuals and the camera and point Jacobians (`m (c + 1 + d)` numbers per observation:
+//! 30 for the projective model, 20 for a 6-parameter affine camera; the blocks
+//! `W = J_cᵀ J_x` are formed where they are used, not stored) plus the non-zeros of `S`
+//! and of its factor; nothing is `O(F·N)`. Tracks are linearised in
 //! parallel, then the camera blocks in parallel over cameras.
 //!
 //! # References
@@ -645,13 +647,13 @@ fn schur_columns(
 }
 
 /// What every range of [`schur_columns`] reads: the graph and the system's pattern, the
-/// sizes `(c, d, k)`, the per-observation blocks `lin` (`stride` values each), the tracks'
-/// linearizations, their `V⁻¹` and `Y_g`.
+/// sizes `(c, d, k, m)`, the per-observation blocks `lin` (`stride` values each), the
+/// tracks' linearizations, their `V⁻¹` and `Y_g`.
 #[derive(Clone, Copy)]
 struct SchurInput<'a> {
     g: &'a Graph,
     pattern: &'a Pattern,
-    dims: (usize, usize, usize),
+    dims: (usize, usize, usize, usize),
     lin: &'a [f64],
     stride: usize,
     lins: &'a [TrackLin],
@@ -672,7 +674,7 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
     let SchurInput {
         g,
         pattern,
-        dims: (cd_rt, pd_rt, k),
+        dims: (cd_rt, pd_rt, k, m),
         lin,
         stride,
         lins,
@@ -682,6 +684,7 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
     let cd = if CD > 0 { CD } else { cd_rt };
     let pd = if PD > 0 { PD } else { pd_rt };
     let mut ys: Vec<f64> = Vec::new();
+    let mut ws: Vec<f64> = Vec::new();
     for p in 0..g.n_pts {
         let range = g.track(p);
         if range.is_empty() {
@@ -694,10 +697,13 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
         }
         let vi = &vinv[p];
         let gp = &lins[p].gp;
-        // Y_i = W_i V⁻¹ for every observation of the track.
+        // W_i = J_cᵀ J_x and Y_i = W_i V⁻¹ for every observation of the track.
         ys.resize(range.len() * cd * pd, 0.0);
+        ws.resize(range.len() * cd * pd, 0.0);
         for (i, o) in range.clone().enumerate() {
-            let wb = &lin[o * stride..o * stride + cd * pd];
+            let wb = &mut ws[i * cd * pd..(i + 1) * cd * pd];
+            w_block(&lin[o * stride..(o + 1) * stride], cd, pd, k, m, wb);
+            let wb = &ws[i * cd * pd..(i + 1) * cd * pd];
             let y = &mut ys[i * cd * pd..(i + 1) * cd * pd];
             for c1 in 0..cd {
                 for d2 in 0..pd {
@@ -721,12 +727,12 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
         }
         if k > 0 {
             let yg = &ygs[p * k * pd..(p + 1) * k * pd];
-            for o in range.clone() {
+            for (i, o) in range.clone().enumerate() {
                 let f = g.cam[o];
                 if !(a..b).contains(&f) {
                     continue;
                 }
-                let wb = &lin[o * stride..o * stride + cd * pd];
+                let wb = &ws[i * cd * pd..(i + 1) * cd * pd];
                 for c1 in 0..cd {
                     for k1 in 0..k {
                         let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * wb[c1 * pd + d]).sum();
@@ -746,7 +752,7 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
             if fj >= b {
                 break;
             }
-            let wj = &lin[oj * stride..oj * stride + cd * pd];
+            let wj = &ws[j * cd * pd..(j + 1) * cd * pd];
             let cols = &pattern.col_ptr[fj * cd..(fj + 1) * cd];
             let nbrs = &pattern.nbrs[fj];
             // Column c2 of block (fj, fj) holds rows c2..cd from cols[c2]; of block
@@ -785,6 +791,24 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
                         }
                     }
                 }
+            }
+        }
+    }
+}
+
+/// `W = J_cᵀ J_x` (`c × d`, row-major) of one observation from its block of the
+/// linearization (`J_c`, `r`, `J_g`, `J_x`; sizes `c`, `d`, `k`, `m`). `O(m c d)`.
+#[inline(always)]
+fn w_block(blk: &[f64], cd: usize, pd: usize, k: usize, m: usize, out: &mut [f64]) {
+    let jc = &blk[..m * cd];
+    let jx = &blk[m * (cd + 1 + k)..m * (cd + 1 + k + pd)];
+    out[..cd * pd].iter_mut().for_each(|w| *w = 0.0);
+    for row in 0..m {
+        let a = &jc[row * cd..(row + 1) * cd];
+        let b = &jx[row * pd..(row + 1) * pd];
+        for c1 in 0..cd {
+            for d in 0..pd {
+                out[c1 * pd + d] += a[c1] * b[d];
             }
         }
     }
@@ -837,13 +861,14 @@ fn apply(v: &mut [f64], delta: &[f64], basis: &[f64], has_basis: bool, n: usize,
 /// The point part of a Schur step from its camera and shared parts:
 /// `δx_p = V_p*⁻¹ (−g_p − Σ_f W_fpᵀ δc_f − W_gpᵀ δg)`, in parallel over tracks, `g_p` given by
 /// `gp(p)` (the gradient, or another right-hand side with the same factor). `dims` =
-/// (camera, point, shared) tangent dimensions. `O(observations · c · d)`.
+/// (camera, point, shared) tangent dimensions and the residual size; `W_fpᵀ δc_f` is
+/// formed as `J_xᵀ (J_c δc_f)`. `O(observations · m (c + d))`.
 #[allow(clippy::too_many_arguments)]
 fn back_substitute<'a>(
     g: &Graph,
     lin: &[f64],
     stride: usize,
-    (cd, pd, k): (usize, usize, usize),
+    (cd, pd, k, m): (usize, usize, usize, usize),
     lins: &[TrackLin],
     vinv: &[Vec<f64>],
     gp: impl Fn(usize) -> &'a [f64] + Sync,
@@ -856,11 +881,13 @@ fn back_substitute<'a>(
             let mut b = gp(p).iter().map(|v| -v).collect::<Vec<_>>();
             for o in g.track(p) {
                 let f = g.cam[o];
-                let wb = &lin[o * stride..o * stride + cd * pd];
-                for c1 in 0..cd {
-                    let dcv = dc[f * cd + c1];
+                let blk = &lin[o * stride..(o + 1) * stride];
+                let jx = &blk[m * (cd + 1 + k)..m * (cd + 1 + k + pd)];
+                for row in 0..m {
+                    let jc = &blk[row * cd..(row + 1) * cd];
+                    let jdc: f64 = (0..cd).map(|c1| jc[c1] * dc[f * cd + c1]).sum();
                     for d in 0..pd {
-                        b[d] -= wb[c1 * pd + d] * dcv;
+                        b[d] -= jx[row * pd + d] * jdc;
                     }
                 }
             }
@@ -885,7 +912,7 @@ struct Accel<'a, M: BundleModel, F: Fn(usize) -> bool> {
     glob: &'a [f64],
     cam_basis: &'a [f64],
     cam_has_basis: &'a [bool],
-    /// Per observation: `W`, `J_c`, `r`, `J_g`, `J_x` (see the linearisation).
+    /// Per observation: `J_c`, `r`, `J_g`, `J_x` (see the linearisation).
     lin: &'a [f64],
     stride: usize,
     lins: &'a [TrackLin],
@@ -937,10 +964,27 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
             model.normalize_cam(c);
         }
         let glob_h: Vec<f64> = self.glob.iter().zip(dg).map(|(v, d)| v + H * d).collect();
-        // Per track (in parallel): r″ of each observation and the point part of Jᵀr″.
-        let per_track: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = (0..np)
+        // Per track (in parallel): r″ of each observation (in observation order, `m` per
+        // observation) and the point and shared parts of Jᵀr″ (`pd` and `k` per track).
+        let kk = k.max(1);
+        let mut rpp = vec![0.0; g.n_obs() * m];
+        let mut gps = vec![0.0; np * pd];
+        let mut ggs = vec![0.0; np * kk];
+        let mut pieces: Vec<&mut [f64]> = Vec::with_capacity(np);
+        {
+            let mut rest: &mut [f64] = &mut rpp;
+            for p in 0..np {
+                let (head, tail) = rest.split_at_mut(g.track(p).len() * m);
+                pieces.push(head);
+                rest = tail;
+            }
+        }
+        pieces
             .into_par_iter()
-            .map(|p| {
+            .zip(gps.par_chunks_mut(pd.max(1)))
+            .zip(ggs.par_chunks_mut(kk))
+            .enumerate()
+            .for_each(|(p, ((rpp, gp), gg))| {
                 let mut x = self.pts[p * pl..(p + 1) * pl].to_vec();
                 let mut pb = vec![0.0; pl * pd];
                 let has = model.pt_basis(&x, &mut pb);
@@ -948,11 +992,7 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
                 apply(&mut x, &d, &pb, has, pl, pd);
                 model.normalize_pt(&mut x);
                 let mut r = vec![0.0; m];
-                let range = g.track(p);
-                let mut rpp = vec![0.0; range.len() * m];
-                let mut gp = vec![0.0; pd];
-                let mut gg = vec![0.0; k];
-                for (i, o) in range.enumerate() {
+                for (i, o) in g.track(p).enumerate() {
                     let f = g.cam[o];
                     model.eval(
                         &cams_h[f * cl..(f + 1) * cl],
@@ -962,7 +1002,7 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
                         &mut r,
                         None,
                     );
-                    let blk = &self.lin[o * stride + cd * pd..(o + 1) * stride];
+                    let blk = &self.lin[o * stride..(o + 1) * stride];
                     let (jct, rest) = blk.split_at(m * cd);
                     let (r0, rest) = rest.split_at(m);
                     let (jg, jpt) = rest.split_at(m * k);
@@ -987,19 +1027,9 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
                         }
                     }
                 }
-                (rpp, gp, gg)
-            })
-            .collect();
-        if per_track
-            .iter()
-            .any(|(r, _, _)| r.iter().any(|v| !v.is_finite()))
-        {
+            });
+        if rpp.iter().any(|v| !v.is_finite()) {
             return None;
-        }
-        // Observation index → its r″ (tracks are stored in observation order).
-        let mut rpp = Vec::with_capacity(g.n_obs() * m);
-        for (r, _, _) in &per_track {
-            rpp.extend_from_slice(r);
         }
         // Camera part of Jᵀr″ (in parallel over cameras).
         let ga_c: Vec<f64> = (0..nf)
@@ -1007,7 +1037,7 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
             .flat_map_iter(|f| {
                 let mut out = vec![0.0; cd];
                 for &o in &self.cam_obs[self.cam_ptr[f]..self.cam_ptr[f + 1]] {
-                    let jct = &self.lin[o * stride + cd * pd..o * stride + cd * pd + m * cd];
+                    let jct = &self.lin[o * stride..o * stride + m * cd];
                     for row in 0..m {
                         for c in 0..cd {
                             out[c] += jct[row * cd + c] * rpp[o * m + row];
@@ -1024,20 +1054,25 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
             rhs[(i, 0)] = -ga_c[i];
         }
         for k1 in 0..k {
-            rhs[(nf * cd + k1, 0)] = -per_track.iter().map(|t| t.2[k1]).sum::<f64>();
+            rhs[(nf * cd + k1, 0)] = -(0..np).map(|p| ggs[p * kk + k1]).sum::<f64>();
         }
         let mut vg = vec![0.0; pd];
         for p in 0..np {
             let vi = &self.vinv[p];
-            let gp = &per_track[p].1;
+            let gp = &gps[p * pd..(p + 1) * pd];
             for d1 in 0..pd {
                 vg[d1] = (0..pd).map(|d2| vi[d1 * pd + d2] * gp[d2]).sum();
             }
+            // W V⁻¹ g_p = J_cᵀ (J_x V⁻¹ g_p).
             for o in g.track(p) {
                 let f = g.cam[o];
-                let wb = &self.lin[o * stride..o * stride + cd * pd];
-                for c1 in 0..cd {
-                    rhs[(f * cd + c1, 0)] += (0..pd).map(|d| wb[c1 * pd + d] * vg[d]).sum::<f64>();
+                let blk = &self.lin[o * stride..(o + 1) * stride];
+                let jx = &blk[m * (cd + 1 + k)..m * (cd + 1 + k + pd)];
+                for row in 0..m {
+                    let t: f64 = (0..pd).map(|d| jx[row * pd + d] * vg[d]).sum();
+                    for c1 in 0..cd {
+                        rhs[(f * cd + c1, 0)] += blk[row * cd + c1] * t;
+                    }
                 }
             }
             let wg = &self.lins[p].wg;
@@ -1065,10 +1100,10 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
             g,
             self.lin,
             stride,
-            (cd, pd, k),
+            (cd, pd, k, m),
             self.lins,
             self.vinv,
-            |p| &per_track[p].1,
+            |p| &gps[p * pd..(p + 1) * pd],
             &ac,
             &ag,
         );
@@ -1186,12 +1221,12 @@ pub fn minimize_shared<M: BundleModel>(
     let mut nu = 2.0;
     let mut status = SolverStatus::MaxIterations;
     let mut iterations = 0;
-    // Buffers reused across iterations: W blocks (cd × pd per observation), camera
-    // blocks U (cd × cd), gradients.
-    // Per observation: W = J_cᵀ J_x (cd × pd), J_c in the tangent space (m × cd), r (m).
-    // And J_g (m × k) when the model has shared parameters.
-    // Then J_x in the tangent space (m × pd), for the geodesic acceleration.
-    let stride = cd * pd + m * cd + m + m * k + m * pd;
+    // Buffers reused across iterations. Per observation: J_c in the tangent space
+    // (m × cd), r (m), J_g (m × k) when the model has shared parameters, and J_x in the
+    // tangent space (m × pd). `W = J_cᵀ J_x` is formed where it is used (the Schur
+    // complement, the back-substitution): storing it took 18 of 38 numbers per
+    // observation for a 6-parameter camera.
+    let stride = m * (cd + 1 + k + pd);
     let mut lin = vec![0.0; nobs * stride];
     // Observations by camera (for the camera blocks, in parallel over cameras).
     let (cam_ptr, cam_obs) = {
@@ -1263,8 +1298,7 @@ pub fn minimize_shared<M: BundleModel>(
                 for (i, o) in g.track(p).enumerate() {
                     let f = g.cam[o];
                     let blk = &mut out[i * stride..(i + 1) * stride];
-                    let (wb, rest) = blk.split_at_mut(cd * pd);
-                    let (jct, rest) = rest.split_at_mut(m * cd);
+                    let (jct, rest) = blk.split_at_mut(m * cd);
                     let (rb, rest) = rest.split_at_mut(m);
                     let (jg, jps) = rest.split_at_mut(m * k);
                     model.eval(
@@ -1291,16 +1325,9 @@ pub fn minimize_shared<M: BundleModel>(
                     tangent(&jp, &pb, has_pb, m, pl, pd, &mut jpt);
                     jps.copy_from_slice(&jpt);
                     rb.copy_from_slice(&r);
-                    wb.iter_mut().for_each(|w| *w = 0.0);
                     for row in 0..m {
-                        let a = &jct[row * cd..(row + 1) * cd];
                         let b = &jpt[row * pd..(row + 1) * pd];
                         let e = r[row];
-                        for c1 in 0..cd {
-                            for c2 in 0..pd {
-                                wb[c1 * pd + c2] += a[c1] * b[c2];
-                            }
-                        }
                         for d1 in 0..pd {
                             gp[d1] += b[d1] * e;
                             for d2 in 0..=d1 {
@@ -1338,7 +1365,7 @@ pub fn minimize_shared<M: BundleModel>(
                 gf.iter_mut().for_each(|x| *x = 0.0);
                 ug.iter_mut().for_each(|x| *x = 0.0);
                 for &o in &cam_obs[cam_ptr[f]..cam_ptr[f + 1]] {
-                    let blk = &lin[o * stride + cd * pd..(o + 1) * stride];
+                    let blk = &lin[o * stride..(o + 1) * stride];
                     let (jct, rest) = blk.split_at(m * cd);
                     let (rb, rest) = rest.split_at(m);
                     let jg = &rest[..m * k];
@@ -1527,7 +1554,7 @@ pub fn minimize_shared<M: BundleModel>(
                 let schur_input = SchurInput {
                     g,
                     pattern: &pattern,
-                    dims: (cd, pd, k),
+                    dims: (cd, pd, k, m),
                     lin: &lin,
                     stride,
                     lins: &lins,
@@ -1621,7 +1648,7 @@ pub fn minimize_shared<M: BundleModel>(
                 g,
                 &lin,
                 stride,
-                (cd, pd, k),
+                (cd, pd, k, m),
                 &lins,
                 vinv,
                 |p| &lins[p].gp,
