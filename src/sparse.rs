@@ -39,12 +39,12 @@
 //! # Complexity
 //!
 //! Memory: the table (24 bytes per observation), the graph (24), the windows' dense
-//! measurements during the start, and the engine's per-observation blocks (`W_fp` 6×3 and
-//! the camera Jacobian 2×12), plus the non-zeros of the reduced camera system and its
-//! factor (`O(F b 36)`); nothing is `O(F·N)` or `O(F²)`. Time: the window fits, linear in
-//! the frames, then per iteration linear in the observations plus the banded
-//! factorisation. The number of iterations still grows on long sequences
-//! (docs/results.md).
+//! measurements during the start, and the engine's per-observation blocks (the residual
+//! and the tangent-space Jacobians, 2×6 camera and 2×3 point: 160 bytes), plus the
+//! non-zeros of the reduced camera system and its factor (`O(F b 36)`); nothing is
+//! `O(F·N)` or `O(F²)`. Time: the window fits, linear in the frames, then per iteration
+//! linear in the observations plus the banded factorisation. The number of iterations
+//! still grows on long sequences (docs/results.md).
 //!
 //! # References
 //!
