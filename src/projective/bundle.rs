@@ -814,6 +814,19 @@ fn w_block(blk: &[f64], cd: usize, pd: usize, k: usize, m: usize, out: &mut [f64
     }
 }
 
+/// `buf` (`per_obs` values per observation, in observation order) split into one slice
+/// per track, for filling in parallel over tracks.
+fn by_track<'a>(buf: &'a mut [f64], g: &Graph, per_obs: usize) -> Vec<&'a mut [f64]> {
+    let mut pieces = Vec::with_capacity(g.n_pts);
+    let mut rest = buf;
+    for p in 0..g.n_pts {
+        let (head, tail) = rest.split_at_mut(g.track(p).len() * per_obs);
+        pieces.push(head);
+        rest = tail;
+    }
+    pieces
+}
+
 /// `out = J B` (m × d) or a copy of `J` when the basis is the identity.
 #[inline]
 fn tangent(
@@ -970,16 +983,7 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
         let mut rpp = vec![0.0; g.n_obs() * m];
         let mut gps = vec![0.0; np * pd];
         let mut ggs = vec![0.0; np * kk];
-        let mut pieces: Vec<&mut [f64]> = Vec::with_capacity(np);
-        {
-            let mut rest: &mut [f64] = &mut rpp;
-            for p in 0..np {
-                let (head, tail) = rest.split_at_mut(g.track(p).len() * m);
-                pieces.push(head);
-                rest = tail;
-            }
-        }
-        pieces
+        by_track(&mut rpp, g, m)
             .into_par_iter()
             .zip(gps.par_chunks_mut(pd.max(1)))
             .zip(ggs.par_chunks_mut(kk))
@@ -1269,17 +1273,8 @@ pub fn minimize_shared<M: BundleModel>(
                 &mut cam_basis[f * cl * cd..(f + 1) * cl * cd],
             );
         }
-        // Per track (in parallel): V_p, g_p and each observation's W, J_c, r.
-        let mut pieces: Vec<&mut [f64]> = Vec::with_capacity(np);
-        {
-            let mut rest: &mut [f64] = &mut lin;
-            for p in 0..np {
-                let (head, tail) = rest.split_at_mut(g.track(p).len() * stride);
-                pieces.push(head);
-                rest = tail;
-            }
-        }
-        let lins: Vec<TrackLin> = pieces
+        // Per track (in parallel): V_p, g_p and each observation's J_c, r, J_g, J_x.
+        let lins: Vec<TrackLin> = by_track(&mut lin, g, stride)
             .into_par_iter()
             .enumerate()
             .map(|(p, out)| {
