@@ -158,10 +158,13 @@ fn child(frames: usize, per_frame: usize, sparse: bool, compare: bool, tuning: &
 }
 
 /// The accuracy floor: the same adjustment started at the true cameras and points (the
-/// tracks the pipeline would fit: ≥ 2 frames each, ≥ 4 per frame). Prints its solves, RMS
-/// and structure error.
+/// tracks the pipeline would fit: the configuration's set-aside minimums, with at least 4
+/// tracks per frame as for any partial table). Prints its solves, RMS and structure error.
 fn adjust_from_truth(table: &rank3::TrackTable, truth: &rank3::MetricModel, config: &Config) {
-    let (kept, _, frames, tracks) = table.set_aside(2, 4);
+    let (kept, _, frames, tracks) = table.set_aside(
+        config.min_frames_per_track,
+        config.min_points_per_frame.max(4),
+    );
     let prob = rank3::sparse::SparseProblem::new(&kept, true);
     let (mut cams, mut pts) = prob.cams_and_points(truth, &frames, &tracks);
     let t0 = Instant::now();

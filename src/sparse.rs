@@ -381,15 +381,15 @@ impl SparseProblem {
     /// completion ended in a local minimum (its RMS over
     /// [`SparseConfig::window_rms_ratio`] times the median window's) is completed again from
     /// up to [`SparseConfig::window_restarts`] random starts. Then, in order, each window is
-    /// mapped into window 0's frame by the
-    /// similarity `X = c A x + b` (reflection allowed: each window has its own depth
-    /// reversal) that best carries its points onto the tracks already placed (Umeyama,
-    /// ≥ 4 shared tracks). A window whose similarity leaves the shared points off by more
-    /// than [`SparseConfig::max_window_mismatch`] of their spread (its motion is too weak
-    /// for its own metric upgrade, or no start found its optimum) is skipped and counted:
-    /// when the next window begins at or before its first frame not yet placed, that window places its frames; otherwise its new frames are bridged
-    /// by an affine map onto the placed points (`affine_bridge`, only approximately
-    /// metric). The similarity is anchored on the shared tracks seen in at least
+    /// mapped into window 0's frame by the similarity `X = c A x + b` (reflection allowed:
+    /// each window has its own depth reversal) that best carries its points onto the tracks
+    /// already placed (Umeyama, ≥ 4 shared tracks). A window whose similarity leaves the
+    /// shared points off by more than [`SparseConfig::max_window_mismatch`] of their spread
+    /// (its motion is too weak for its own metric upgrade, or no start found its optimum)
+    /// is skipped and counted: when the next window begins at or before its first frame not
+    /// yet placed, that window places its frames; otherwise its new frames are bridged by
+    /// an affine map onto the placed points (`affine_bridge`, only approximately metric).
+    /// The similarity is anchored on the shared tracks seen in at least
     /// [`WindowConfig::min_anchor_observations`](crate::projective::windowed::WindowConfig)
     /// frames of both windows (a track seen in two or three frames of a window has a
     /// poorly determined depth there; with every shared track, a 2 000-frame corridor's

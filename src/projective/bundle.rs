@@ -702,7 +702,7 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
         ws.resize(range.len() * cd * pd, 0.0);
         for (i, o) in range.clone().enumerate() {
             let wb = &mut ws[i * cd * pd..(i + 1) * cd * pd];
-            w_block(&lin[o * stride..(o + 1) * stride], cd, pd, k, m, wb);
+            w_block(&lin[o * stride..(o + 1) * stride], (cd, pd, k, m), wb);
             let wb = &ws[i * cd * pd..(i + 1) * cd * pd];
             let y = &mut ys[i * cd * pd..(i + 1) * cd * pd];
             for c1 in 0..cd {
@@ -796,12 +796,21 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
     }
 }
 
-/// `W = J_cᵀ J_x` (`c × d`, row-major) of one observation from its block of the
-/// linearization (`J_c`, `r`, `J_g`, `J_x`; sizes `c`, `d`, `k`, `m`). `O(m c d)`.
+/// The point Jacobian `J_x` (`m × d`, tangent space) in one observation's block of the
+/// linearization, laid out `J_c` (`m × c`), `r` (`m`), `J_g` (`m × k`), `J_x`; `dims` =
+/// `(c, d, k, m)`.
 #[inline(always)]
-fn w_block(blk: &[f64], cd: usize, pd: usize, k: usize, m: usize, out: &mut [f64]) {
+fn point_jacobian(blk: &[f64], (cd, pd, k, m): (usize, usize, usize, usize)) -> &[f64] {
+    &blk[m * (cd + 1 + k)..m * (cd + 1 + k + pd)]
+}
+
+/// `W = J_cᵀ J_x` (`c × d`, row-major) of one observation from its block of the
+/// linearization ([`point_jacobian`] has the layout). `O(m c d)`.
+#[inline(always)]
+fn w_block(blk: &[f64], dims: (usize, usize, usize, usize), out: &mut [f64]) {
+    let (cd, pd, _, m) = dims;
     let jc = &blk[..m * cd];
-    let jx = &blk[m * (cd + 1 + k)..m * (cd + 1 + k + pd)];
+    let jx = point_jacobian(blk, dims);
     out[..cd * pd].iter_mut().for_each(|w| *w = 0.0);
     for row in 0..m {
         let a = &jc[row * cd..(row + 1) * cd];
@@ -895,7 +904,7 @@ fn back_substitute<'a>(
             for o in g.track(p) {
                 let f = g.cam[o];
                 let blk = &lin[o * stride..(o + 1) * stride];
-                let jx = &blk[m * (cd + 1 + k)..m * (cd + 1 + k + pd)];
+                let jx = point_jacobian(blk, (cd, pd, k, m));
                 for row in 0..m {
                     let jc = &blk[row * cd..(row + 1) * cd];
                     let jdc: f64 = (0..cd).map(|c1| jc[c1] * dc[f * cd + c1]).sum();
@@ -1071,7 +1080,7 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
             for o in g.track(p) {
                 let f = g.cam[o];
                 let blk = &self.lin[o * stride..(o + 1) * stride];
-                let jx = &blk[m * (cd + 1 + k)..m * (cd + 1 + k + pd)];
+                let jx = point_jacobian(blk, (cd, pd, k, m));
                 for row in 0..m {
                     let t: f64 = (0..pd).map(|d| jx[row * pd + d] * vg[d]).sum();
                     for c1 in 0..cd {
