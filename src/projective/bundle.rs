@@ -796,21 +796,27 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
     }
 }
 
-/// The point Jacobian `J_x` (`m × d`, tangent space) in one observation's block of the
-/// linearization, laid out `J_c` (`m × c`), `r` (`m`), `J_g` (`m × k`), `J_x`; `dims` =
-/// `(c, d, k, m)`.
+/// The parts of one observation's block of the linearization, `(J_c, r, J_g, J_x)`: the
+/// camera Jacobian (`m × c`, tangent space), the residual (`m`), the shared-parameter
+/// Jacobian (`m × k`) and the point Jacobian (`m × d`, tangent space), stored in that
+/// order (the linearization writes them); `dims` = `(c, d, k, m)`.
 #[inline(always)]
-fn point_jacobian(blk: &[f64], (cd, pd, k, m): (usize, usize, usize, usize)) -> &[f64] {
-    &blk[m * (cd + 1 + k)..m * (cd + 1 + k + pd)]
+fn obs_parts(
+    blk: &[f64],
+    (cd, pd, k, m): (usize, usize, usize, usize),
+) -> (&[f64], &[f64], &[f64], &[f64]) {
+    let (jc, rest) = blk.split_at(m * cd);
+    let (r, rest) = rest.split_at(m);
+    let (jg, rest) = rest.split_at(m * k);
+    (jc, r, jg, &rest[..m * pd])
 }
 
 /// `W = J_cᵀ J_x` (`c × d`, row-major) of one observation from its block of the
-/// linearization ([`point_jacobian`] has the layout). `O(m c d)`.
+/// linearization ([`obs_parts`] has the layout). `O(m c d)`.
 #[inline(always)]
 fn w_block(blk: &[f64], dims: (usize, usize, usize, usize), out: &mut [f64]) {
     let (cd, pd, _, m) = dims;
-    let jc = &blk[..m * cd];
-    let jx = point_jacobian(blk, dims);
+    let (jc, _, _, jx) = obs_parts(blk, dims);
     out[..cd * pd].iter_mut().for_each(|w| *w = 0.0);
     for row in 0..m {
         let a = &jc[row * cd..(row + 1) * cd];
@@ -903,10 +909,9 @@ fn back_substitute<'a>(
             let mut b = gp(p).iter().map(|v| -v).collect::<Vec<_>>();
             for o in g.track(p) {
                 let f = g.cam[o];
-                let blk = &lin[o * stride..(o + 1) * stride];
-                let jx = point_jacobian(blk, (cd, pd, k, m));
+                let (jc, _, _, jx) = obs_parts(&lin[o * stride..(o + 1) * stride], (cd, pd, k, m));
                 for row in 0..m {
-                    let jc = &blk[row * cd..(row + 1) * cd];
+                    let jc = &jc[row * cd..(row + 1) * cd];
                     let jdc: f64 = (0..cd).map(|c1| jc[c1] * dc[f * cd + c1]).sum();
                     for d in 0..pd {
                         b[d] -= jx[row * pd + d] * jdc;
@@ -1015,10 +1020,8 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
                         &mut r,
                         None,
                     );
-                    let blk = &self.lin[o * stride..(o + 1) * stride];
-                    let (jct, rest) = blk.split_at(m * cd);
-                    let (r0, rest) = rest.split_at(m);
-                    let (jg, jpt) = rest.split_at(m * k);
+                    let (jct, r0, jg, jpt) =
+                        obs_parts(&self.lin[o * stride..(o + 1) * stride], (cd, pd, k, m));
                     for row in 0..m {
                         let mut jd = 0.0;
                         for c in 0..cd {
@@ -1050,7 +1053,8 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
             .flat_map_iter(|f| {
                 let mut out = vec![0.0; cd];
                 for &o in &self.cam_obs[self.cam_ptr[f]..self.cam_ptr[f + 1]] {
-                    let jct = &self.lin[o * stride..o * stride + m * cd];
+                    let (jct, _, _, _) =
+                        obs_parts(&self.lin[o * stride..(o + 1) * stride], (cd, pd, k, m));
                     for row in 0..m {
                         for c in 0..cd {
                             out[c] += jct[row * cd + c] * rpp[o * m + row];
@@ -1079,12 +1083,12 @@ impl<M: BundleModel, F: Fn(usize) -> bool + Sync> Accel<'_, M, F> {
             // W V⁻¹ g_p = J_cᵀ (J_x V⁻¹ g_p).
             for o in g.track(p) {
                 let f = g.cam[o];
-                let blk = &self.lin[o * stride..(o + 1) * stride];
-                let jx = point_jacobian(blk, (cd, pd, k, m));
+                let (jc, _, _, jx) =
+                    obs_parts(&self.lin[o * stride..(o + 1) * stride], (cd, pd, k, m));
                 for row in 0..m {
                     let t: f64 = (0..pd).map(|d| jx[row * pd + d] * vg[d]).sum();
                     for c1 in 0..cd {
-                        rhs[(f * cd + c1, 0)] += blk[row * cd + c1] * t;
+                        rhs[(f * cd + c1, 0)] += jc[row * cd + c1] * t;
                     }
                 }
             }
@@ -1236,9 +1240,9 @@ pub fn minimize_shared<M: BundleModel>(
     let mut iterations = 0;
     // Buffers reused across iterations. Per observation: J_c in the tangent space
     // (m × cd), r (m), J_g (m × k) when the model has shared parameters, and J_x in the
-    // tangent space (m × pd). `W = J_cᵀ J_x` is formed where it is used (the Schur
-    // complement, the back-substitution): storing it took 18 of 38 numbers per
-    // observation for a 6-parameter camera.
+    // tangent space (m × pd), the layout `obs_parts` reads. `W = J_cᵀ J_x` is formed
+    // where it is used (the Schur complement, the back-substitution): storing it took 18
+    // of 38 numbers per observation for a 6-parameter camera.
     let stride = m * (cd + 1 + k + pd);
     let mut lin = vec![0.0; nobs * stride];
     // Observations by camera (for the camera blocks, in parallel over cameras).
@@ -1369,10 +1373,8 @@ pub fn minimize_shared<M: BundleModel>(
                 gf.iter_mut().for_each(|x| *x = 0.0);
                 ug.iter_mut().for_each(|x| *x = 0.0);
                 for &o in &cam_obs[cam_ptr[f]..cam_ptr[f + 1]] {
-                    let blk = &lin[o * stride..(o + 1) * stride];
-                    let (jct, rest) = blk.split_at(m * cd);
-                    let (rb, rest) = rest.split_at(m);
-                    let jg = &rest[..m * k];
+                    let (jct, rb, jg, _) =
+                        obs_parts(&lin[o * stride..(o + 1) * stride], (cd, pd, k, m));
                     for row in 0..m {
                         let a = &jct[row * cd..(row + 1) * cd];
                         for c1 in 0..cd {
