@@ -2221,15 +2221,6 @@ fn fit_selection(
             s: affine.s_hat.as_ref(),
             t: &affine.t,
         };
-        // For the perspective camera the projective model only prepares the perspective
-        // stages: its adjustment is capped.
-        let mut pcfg = config.projective.clone();
-        if config.camera.is_perspective() {
-            pcfg.refine.max_iterations = pcfg
-                .refine
-                .max_iterations
-                .min(config.perspective.projective_iterations.max(1));
-        }
         // The previous fit's cameras, when they are this fit's frames.
         let warm = previous
             .filter(|(_, frames)| *frames == &used_frames[..])
@@ -2242,6 +2233,18 @@ fn fit_selection(
                 model
             })
             .filter(|m| m.points.iter().flatten().all(|v| v.is_finite()));
+        // For the perspective camera the projective model only prepares the perspective
+        // stages: its adjustment is capped, more tightly when it starts from the previous
+        // fit's cameras.
+        let mut pcfg = config.projective.clone();
+        if config.camera.is_perspective() {
+            let cap = if warm.is_some() {
+                config.perspective.projective_refit_iterations
+            } else {
+                config.perspective.projective_iterations
+            };
+            pcfg.refine.max_iterations = pcfg.refine.max_iterations.min(cap.max(1));
+        }
         let pf = timer.run("projective", |obs| match &warm {
             Some(model) => projective::refine(&meas, model, &pcfg, 0, obs),
             None => projective::fit(&meas, start, &pcfg, 0, obs),
