@@ -49,7 +49,10 @@
 //! `ν` and doubles `ν` (Nielsen). `D = diag(U)` floored at `10⁻⁹ · mean diag(U)`. Nielsen's
 //! smooth decrease (`λ·max(1/3, 1 − (2ρ − 1)³)`) kept λ near 1e-8 on a 300-frame sequence
 //! whose gains stayed between 1/4 and 3/4, and took 34 solves where this rule takes 15
-//! (docs/results.md).
+//! (docs/results.md). After a rejected step, the damping at which a step is then accepted is
+//! kept for the next step rather than lowered: along a long sequence's soft modes the
+//! steps alternated *accepted at λ, rejected at λ/5, rejected at 2λ/5, accepted at 8λ/5*
+//! (three solves per accepted step; measured, docs/results.md).
 //!
 //! **When `S` fails to factorize.** In exact arithmetic `S` is positive definite for any
 //! `λ > 0` (with the gauge springs); in floating point a point whose block `V_p` is nearly
@@ -1268,6 +1271,9 @@ pub fn minimize_shared<M: BundleModel>(
     // The point blocks' regularisation, relative to their mean diagonal: 10⁻¹², raised to
     // `POINT_BLOCK_FLOOR` for the rest of the run when the reduced system fails to factorize.
     let mut point_floor = 1e-12;
+    // Whether a step was rejected since the last accepted one: the damping that was then
+    // accepted is kept for the next step instead of lowered.
+    let mut retried = false;
     let mut status = SolverStatus::MaxIterations;
     let mut iterations = 0;
     // Buffers reused across iterations. Per observation: J_c in the tangent space
@@ -1828,11 +1834,12 @@ pub fn minimize_shared<M: BundleModel>(
                 glob.copy_from_slice(&trial_glob);
                 cur = new_cost;
                 costs.push(cur);
-                if rho > 0.25 {
+                if rho > 0.25 && !retried {
                     lambda /= 5.0;
                 }
                 lambda = lambda.max(lambda_floor);
                 nu = 2.0;
+                retried = false;
                 progress.observer.on_event(&Event::Iteration {
                     solver: progress.name,
                     run: progress.run,
@@ -1874,6 +1881,7 @@ pub fn minimize_shared<M: BundleModel>(
                 status = SolverStatus::Converged;
                 break 'outer;
             }
+            retried = true;
             lambda *= nu;
             nu *= 2.0;
             if lambda > 1e16 {
