@@ -1665,30 +1665,22 @@ pub fn minimize_shared<M: BundleModel>(
                 values[pattern.glob(nf, k1, k1)] += lambda * d;
             }
             let mat = SparseColMatRef::new(pattern.symbolic.as_ref(), &values);
-            let llt = match Llt::try_new_with_symbolic(pattern.llt.clone(), mat, Side::Lower) {
-                Ok(l) => l,
-                Err(_) => {
-                    if point_floor < POINT_BLOCK_FLOOR {
-                        point_floor = POINT_BLOCK_FLOOR;
-                        assembled = None;
-                        continue;
-                    }
-                    lambda_floor = lambda_floor.max(2.0 * lambda);
-                    lambda *= nu;
-                    nu *= 2.0;
-                    if lambda > 1e16 {
-                        status = SolverStatus::Stalled;
-                        break 'outer;
-                    }
-                    continue;
-                }
-            };
-            llt.solve_in_place(rhs.as_mut());
-            let dc: Vec<f64> = (0..nf * cd)
-                .map(|i| if is_fixed(i / cd) { 0.0 } else { rhs[(i, 0)] })
-                .collect();
-            let dg: Vec<f64> = (0..k).map(|i| rhs[(nf * cd + i, 0)]).collect();
-            if dc.iter().chain(dg.iter()).any(|v| !v.is_finite()) {
+            let solved = Llt::try_new_with_symbolic(pattern.llt.clone(), mat, Side::Lower)
+                .ok()
+                .and_then(|llt| {
+                    llt.solve_in_place(rhs.as_mut());
+                    let dc: Vec<f64> = (0..nf * cd)
+                        .map(|i| if is_fixed(i / cd) { 0.0 } else { rhs[(i, 0)] })
+                        .collect();
+                    let dg: Vec<f64> = (0..k).map(|i| rhs[(nf * cd + i, 0)]).collect();
+                    dc.iter()
+                        .chain(&dg)
+                        .all(|v| v.is_finite())
+                        .then_some((llt, dc, dg))
+                });
+            // The factorization failed or the step is not finite: `S` is not positive
+            // definite at this damping (`POINT_BLOCK_FLOOR` says why).
+            let Some((llt, dc, dg)) = solved else {
                 if point_floor < POINT_BLOCK_FLOOR {
                     point_floor = POINT_BLOCK_FLOOR;
                     assembled = None;
@@ -1697,8 +1689,12 @@ pub fn minimize_shared<M: BundleModel>(
                 lambda_floor = lambda_floor.max(2.0 * lambda);
                 lambda *= nu;
                 nu *= 2.0;
+                if lambda > 1e16 {
+                    status = SolverStatus::Stalled;
+                    break 'outer;
+                }
                 continue;
-            }
+            };
             // Back-substitute the points.
             let dp = back_substitute(
                 g,
