@@ -1440,13 +1440,15 @@ fn robust_stage(
             let candidates: Vec<usize> = (0..n)
                 .filter(|&p| !sel.inlier[p] || n_flagged[p] > 0)
                 .collect();
-            sel.other_groups = crate::segment::other_objects(
-                &meas_all,
-                model,
-                &candidates,
-                &crate::segment::SegmentConfig::default(),
-                &mut rng,
-            )?;
+            sel.other_groups = timer.run("other-objects", |_| {
+                crate::segment::other_objects(
+                    &meas_all,
+                    model,
+                    &candidates,
+                    &crate::segment::SegmentConfig::default(),
+                    &mut rng,
+                )
+            })?;
             for &p in sel.other_groups.iter().flatten() {
                 if sel.inlier[p] {
                     sel.inlier[p] = false;
