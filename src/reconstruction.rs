@@ -1440,6 +1440,7 @@ fn robust_stage(
             let candidates: Vec<usize> = (0..n)
                 .filter(|&p| !sel.inlier[p] || n_flagged[p] > 0)
                 .collect();
+            // Its own entry of `timings`; the recording keeps it on the robust stage.
             sel.other_groups = timer.run("other-objects", |_| {
                 crate::segment::other_objects(
                     &meas_all,

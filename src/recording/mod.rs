@@ -15,7 +15,8 @@
 //!
 //! * `stage` (sequence): [`STAGES`] gives the index of each stage — 0 input, 1 set-aside,
 //!   2 robust, 3 factorize, 4 metric-upgrade, 5 refine, 6 projective, 7 perspective, 8 result,
-//!   9 mesh.
+//!   9 mesh (the completion, `complete`, is logged on 3 and the robust pass's search for
+//!   other objects, `other-objects`, on 2).
 //!   Stages the table does not
 //!   know get indices after it, in order of appearance.
 //! * `frame` (sequence): the frame's index in the *input* table (not its id).
@@ -309,6 +310,8 @@ impl Default for RecordingOptions {
 pub fn stage_index(stage: &str) -> Option<i64> {
     match stage {
         "complete" => Some(3),
+        // The robust pass's search for other rigid objects: part of the robust stage.
+        "other-objects" => Some(2),
         _ => STAGES.iter().position(|s| *s == stage).map(|i| i as i64),
     }
 }
