@@ -145,8 +145,9 @@ impl AffineSubspace {
 /// One frame's least-squares camera from its normal equations `A = Σ v vᵀ`, `b_x = Σ v x`,
 /// `b_y = Σ v y` over its entries (`v = [s_p; 1]`, `(x, y)` the observation): the rows
 /// `([m_x; t_x], [m_y; t_y])`, or `None` when `A` is ill-conditioned or not positive
-/// definite: its smallest eigenvalue not above `10⁻¹⁰ tr(A)` (at least `10⁻¹⁰` times the
-/// largest), tested exactly as the Cholesky factorization of `A − 10⁻¹⁰ tr(A) I` failing.
+/// definite: its smallest eigenvalue not above `10⁻¹⁰ tr(A)` (a threshold between 10⁻¹⁰ and
+/// 4·10⁻¹⁰ times the largest eigenvalue), tested exactly as the Cholesky factorization of
+/// `A − 10⁻¹⁰ tr(A) I` failing.
 /// O(1): two 4×4 factorizations (an eigendecomposition here was 30 % of a small table's
 /// robust pass and segmentation).
 pub(crate) fn solve_camera(
