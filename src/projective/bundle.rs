@@ -1211,6 +1211,15 @@ pub fn minimize_fixed<M: BundleModel>(
 /// 23 of 42 solves were failed factorizations at λ ≈ 10⁻⁸.
 const POINT_BLOCK_FLOOR: f64 = 1.4901161193847656e-8;
 
+/// Raises the damping after a failed factorization or a rejected step (`λ ← λν`, `ν ← 2ν`;
+/// Nielsen). Returns whether `λ` now exceeds `10¹⁶`: no step can be found, the run has
+/// stalled.
+fn raise_damping(lambda: &mut f64, nu: &mut f64) -> bool {
+    *lambda *= *nu;
+    *nu *= 2.0;
+    *lambda > 1e16
+}
+
 /// [`minimize_fixed`] for a model with shared parameters ([`BundleModel::glob_len`] of
 /// them, in `glob`, updated in place): they are unknowns of the reduced system ordered
 /// after the cameras, coupled to every camera (`O(F · glob_len)` more non-zeros in `S`).
@@ -1687,9 +1696,7 @@ pub fn minimize_shared<M: BundleModel>(
                     continue;
                 }
                 lambda_floor = lambda_floor.max(2.0 * lambda);
-                lambda *= nu;
-                nu *= 2.0;
-                if lambda > 1e16 {
+                if raise_damping(&mut lambda, &mut nu) {
                     status = SolverStatus::Stalled;
                     break 'outer;
                 }
@@ -1878,9 +1885,7 @@ pub fn minimize_shared<M: BundleModel>(
                 break 'outer;
             }
             retried = true;
-            lambda *= nu;
-            nu *= 2.0;
-            if lambda > 1e16 {
+            if raise_damping(&mut lambda, &mut nu) {
                 status = SolverStatus::Stalled;
                 break 'outer;
             }
