@@ -620,8 +620,11 @@ pub fn fit_observations(
     let px = 1.0 / norm.scale;
     let t0 = Instant::now();
     observer.on_event(&Event::StageStarted { stage: "windows" });
+    let mut on_reference = false;
     let start = if windows.projective {
-        windowed::projective_start(&g, windows, cfg, px, observer)?
+        let s = windowed::projective_start(&g, windows, cfg, px, observer)?;
+        on_reference = s.on_reference;
+        (s.cams, s.pts)
     } else {
         let (mut c, mut x) = windowed::affine_start(&g, windows)?;
         condition(&mut c, &mut x);
@@ -644,6 +647,20 @@ pub fn fit_observations(
         start
     } else {
         bridge(&g, px, start.0, start.1, cfg, 0, observer, &mut stages)?
+    };
+    // Started on the metric reference, the adjustment follows the chain's soft modes from
+    // the reference's shape: geodesic acceleration (WindowConfig's setting).
+    let accelerated;
+    let cfg = if on_reference
+        && cfg.refine.geodesic_acceleration == 0.0
+        && windows.reference_geodesic_acceleration > 0.0
+    {
+        let mut c = cfg.clone();
+        c.refine.geodesic_acceleration = windows.reference_geodesic_acceleration;
+        accelerated = c;
+        &accelerated
+    } else {
+        cfg
     };
     bundle_adjust(
         &g,

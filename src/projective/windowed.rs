@@ -75,6 +75,21 @@ pub struct WindowConfig {
     /// this (and keeps no window fits for it); `Some(0.0)` always does. Default `Some(3.0)`.
     #[serde(default = "default_drift_ratio")]
     pub drift_ratio: Option<f64>,
+    /// The geodesic acceleration (`LmConfig::geodesic_acceleration`'s `α`) of the global
+    /// projective adjustment when the windows were placed on the metric reference (see
+    /// `drift_ratio`), where the adjustment's own setting is 0. That start's long-range
+    /// shape is the metric reference's, and the adjustment then moves it along the
+    /// chain's soft modes, a curved valley where the plain damped steps alternate
+    /// acceptance and rejection: on a 2 000-frame corridor forced onto the reference, 89
+    /// solves without it, 32 with `α = 0.75`, to a lower cost (docs/results.md). From the
+    /// chain the start is near the optimum and the adjustment keeps its own setting. 0
+    /// disables it. Default 0.75.
+    #[serde(default = "default_reference_geodesic_acceleration")]
+    pub reference_geodesic_acceleration: f64,
+}
+
+fn default_reference_geodesic_acceleration() -> f64 {
+    0.75
 }
 
 fn default_drift_ratio() -> Option<f64> {
@@ -91,6 +106,7 @@ impl Default for WindowConfig {
             local_iterations: 20,
             min_anchor_observations: 6,
             drift_ratio: default_drift_ratio(),
+            reference_geodesic_acceleration: default_reference_geodesic_acceleration(),
         }
     }
 }
@@ -216,7 +232,7 @@ pub fn projective_start(
     pcfg: &super::ProjectiveConfig,
     px: f64,
     observer: &mut dyn Observer,
-) -> Result<(Vec<f64>, Vec<f64>)> {
+) -> Result<ProjectiveStart> {
     let mut fits = Vec::new();
     let keep = cfg.drift_ratio.map(|r| (r, &mut fits));
     let ratio = keep.as_ref().map(|k| k.0);
@@ -229,13 +245,18 @@ pub fn projective_start(
         Fits::Run(keep.map(|k| k.1)),
         observer,
     )?;
+    let from_chain = |c: Chained| ProjectiveStart {
+        cams: c.cams,
+        pts: c.pts,
+        on_reference: false,
+    };
     let Some(ratio) = ratio else {
-        return Ok((chained.cams, chained.pts));
+        return Ok(from_chain(chained));
     };
     let reference_rms = chained.median_window_rms.max(NOISE_FLOOR);
     let rms = start_rms(g, &chained.cams, &chained.pts);
     if rms <= ratio * reference_rms {
-        return Ok((chained.cams, chained.pts));
+        return Ok(from_chain(chained));
     }
     observer.on_event(&Event::Warning {
         message: &format!(
@@ -264,7 +285,7 @@ pub fn projective_start(
                      adjustment starts from the chain as it is"
                 ),
             });
-            return Ok((chained.cams, chained.pts));
+            return Ok(from_chain(chained));
         }
     };
     drop(chained);
@@ -281,7 +302,20 @@ pub fn projective_start(
         Fits::Replay(fits.into_iter()),
         observer,
     )?;
-    Ok((chained.cams, chained.pts))
+    Ok(ProjectiveStart {
+        cams: chained.cams,
+        pts: chained.pts,
+        on_reference: true,
+    })
+}
+
+/// What [`projective_start`] returns: cameras (12 per frame) and points (4 per track), and
+/// whether the windows were placed on the metric reference (the chain had drifted).
+#[derive(Debug, Clone)]
+pub struct ProjectiveStart {
+    pub cams: Vec<f64>,
+    pub pts: Vec<f64>,
+    pub on_reference: bool,
 }
 
 /// Reprojection RMS (graph units) of the chained cameras `cams`: each placed track (`pts`
