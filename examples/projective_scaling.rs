@@ -6,13 +6,14 @@
 //! its peak resident memory (`VmHWM`) is its own.
 //!
 //! `cargo run --release --example projective_scaling -- [FRAMES ...] [--points-per-frame K]
-//! [--max-iterations N] [--affine-windows] [--perspective [--focal PX]]`
+//! [--max-iterations N] [--affine-windows] [--perspective [--focal PX] [--from-truth]]`
 //! (default 1000 2000 5000 10000 20000; K, default 150, sets the density; N caps the bundle
 //! adjustment, to measure its cost per iteration; `--affine-windows` chains affine windows,
 //! cheaper than the default projective ones; `--perspective` runs the metric perspective
 //! chain instead, [`rank3::perspective::fit_observations`], and scores its focal length and
 //! structure against the truth, the focal length self-calibrated unless `--focal` gives
-//! it). The growth exponents are the log–log slopes of time and memory against the number
+//! it; with `--from-truth` (and `--one`) the same metric adjustment is also run started at
+//! the true cameras, focal length and points — the accuracy floor — and scored alike). The growth exponents are the log–log slopes of time and memory against the number
 //! of observations between the smallest and the largest size.
 
 use std::process::Command;
@@ -201,7 +202,7 @@ fn metric_start(
 /// (true focal length 500 px). Prints one tab-separated line: frames, tracks,
 /// observations, seconds, peak MB, RMS px, focal px, focal error %, structure error %
 /// (after the best similarity, of the true points' spread), status, stages.
-fn one_perspective(frames: usize, per_frame: usize, focal: Option<f64>) {
+fn one_perspective(frames: usize, per_frame: usize, focal: Option<f64>, from_truth: bool) {
     let (obs, truth) = table(frames, per_frame, 1);
     let n_tracks = truth.len();
     let mut cfg = PerspectiveConfig::default();
@@ -238,6 +239,47 @@ fn one_perspective(frames: usize, per_frame: usize, focal: Option<f64>) {
         }
         Err(e) => println!("{frames}\t{n_tracks}\t{}\terror: {e}", obs.len()),
     }
+    if from_truth {
+        // The same adjustment started at the truth: K (500 px, principal point (320, 240)),
+        // R_f, t_f = −R_f c_f and the true points.
+        let cams: Vec<_> = (0..frames)
+            .map(rank3::synth::perspective_corridor_camera)
+            .collect();
+        let start = rank3::perspective::PerspectiveModel {
+            focal_px: vec![focal.unwrap_or(500.0); frames],
+            principal_point: [320.0, 240.0],
+            k1: 0.0,
+            aspect: 1.0,
+            rotations: cams.iter().map(|(_, r, _)| *r.matrix()).collect(),
+            translations: cams.iter().map(|(_, r, c)| -(r * c)).collect(),
+            points: truth.clone(),
+        };
+        let t0 = Instant::now();
+        match rank3::perspective::refine_observations(
+            &obs,
+            frames,
+            n_tracks,
+            &start,
+            &cfg,
+            &mut Printer,
+        ) {
+            Ok(fit) => {
+                let f = fit.model.focal_px[0];
+                let structure = align_similarity(&fit.model.points, &truth, false)
+                    .map_or(f64::NAN, |a| 100.0 * a.relative_rms);
+                println!(
+                    "from the truth: {:.2} s, {} iterations, {:?}, RMS {:.9} px, focal {f:.2} px \
+                     ({:.3} %), structure error {structure:.3} %",
+                    t0.elapsed().as_secs_f64(),
+                    fit.report.iterations,
+                    fit.report.status,
+                    fit.rms_px,
+                    100.0 * (f - 500.0).abs() / 500.0
+                );
+            }
+            Err(e) => println!("from the truth: error: {e}"),
+        }
+    }
 }
 
 fn main() {
@@ -249,6 +291,7 @@ fn main() {
     let mut affine_windows = false;
     let mut perspective = false;
     let mut focal = None;
+    let mut from_truth = false;
     let mut i = 0;
     while i < args.len() {
         match args[i].as_str() {
@@ -258,6 +301,7 @@ fn main() {
             }
             "--one" => child = true,
             "--perspective" => perspective = true,
+            "--from-truth" => from_truth = true,
             "--focal" => {
                 focal = args.get(i + 1).and_then(|a| a.parse().ok());
                 i += 1;
@@ -274,7 +318,7 @@ fn main() {
     if child {
         for &f in &sizes {
             if perspective {
-                one_perspective(f, per_frame, focal);
+                one_perspective(f, per_frame, focal, from_truth);
             } else {
                 one(f, per_frame, max_iterations, affine_windows);
             }

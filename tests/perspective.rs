@@ -325,3 +325,94 @@ fn long_sequence_input_errors_are_typed() {
     obs[3].xy[0] = f64::NAN;
     assert!(matches!(run(&obs, 60), Err(Error::Degenerate(_))));
 }
+
+/// `perspective::refine_observations` (the long path's sparse adjustment from a given
+/// model): started near the truth of a noise-free corridor — every rotation turned by
+/// ~0.6°, every point moved by ~1 % of its depth, the focal length 4 % off — it recovers
+/// the exact cameras, focal length and points; a start of the wrong size is a typed error.
+#[test]
+fn a_long_sequence_is_refined_from_a_given_model() {
+    use nalgebra::{Rotation3, Vector3};
+    let frames = 80;
+    let (obs, truth) = rank3::synth::perspective_corridor(frames, 40, 0.0, 3);
+    let mut cfg = PerspectiveConfig::default();
+    cfg.intrinsics.principal_point = Some([320.0, 240.0]);
+    cfg.intrinsics.image_size = Some([640, 480]);
+    let cams: Vec<_> = (0..frames)
+        .map(rank3::synth::perspective_corridor_camera)
+        .collect();
+    let nudge = |k: usize| ((k as f64) * 0.7).sin();
+    let start = rank3::perspective::PerspectiveModel {
+        focal_px: vec![520.0],
+        principal_point: [320.0, 240.0],
+        k1: 0.0,
+        aspect: 1.0,
+        rotations: cams
+            .iter()
+            .enumerate()
+            .map(|(f, (_, r, _))| {
+                Rotation3::from_euler_angles(0.01 * nudge(f), 0.01 * nudge(f + 1), 0.0).matrix()
+                    * r.matrix()
+            })
+            .collect(),
+        translations: cams.iter().map(|(_, r, c)| -(r * c)).collect(),
+        points: truth
+            .iter()
+            .enumerate()
+            .map(|(p, x)| x + 0.05 * Vector3::new(nudge(p), nudge(p + 2), nudge(p + 5)))
+            .collect(),
+    };
+    let fit = rank3::perspective::refine_observations(
+        &obs,
+        frames,
+        truth.len(),
+        &start,
+        &cfg,
+        &mut rank3::NoopObserver,
+    )
+    .unwrap();
+    assert!(
+        start_rms_is_large(&obs, &start),
+        "the start must be off the data"
+    );
+    assert!(fit.rms_px < 1e-6, "RMS {} px", fit.rms_px);
+    assert!(
+        (fit.model.focal_px[0] - 500.0).abs() < 1e-5 * 500.0,
+        "focal {} px",
+        fit.model.focal_px[0]
+    );
+    let structure = align_similarity(&fit.model.points, &truth, false)
+        .unwrap()
+        .relative_rms;
+    assert!(structure < 1e-6, "structure error {structure}");
+    let mut short = start.clone();
+    short.points.pop();
+    assert!(matches!(
+        rank3::perspective::refine_observations(
+            &obs,
+            frames,
+            truth.len(),
+            &short,
+            &cfg,
+            &mut rank3::NoopObserver,
+        ),
+        Err(Error::Dimension { .. })
+    ));
+}
+
+/// Whether `model` reprojects `obs` at more than 1 px RMS.
+fn start_rms_is_large(
+    obs: &[rank3::projective::Observation],
+    model: &rank3::perspective::PerspectiveModel,
+) -> bool {
+    let mut m = model.clone();
+    m.focal_px = vec![model.focal_px[0]; model.rotations.len()];
+    let sum: f64 = obs
+        .iter()
+        .map(|o| {
+            let y = m.project_point(o.frame, &m.points[o.track]);
+            (y[0] - o.xy[0]).powi(2) + (y[1] - o.xy[1]).powi(2)
+        })
+        .sum();
+    (sum / (2 * obs.len()) as f64).sqrt() > 1.0
+}

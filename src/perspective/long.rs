@@ -106,6 +106,7 @@ pub fn fit_observations(
         points,
     };
     let estimate_pp = cfg.estimates_principal_point(&assumed);
+    let cfg = &long_adjustment(cfg);
     let mut out = adjust_graph(&g, start, cfg, &assumed, estimate_pp, 0, observer)?;
     out.stages.insert(
         0,
@@ -119,6 +120,78 @@ pub fn fit_observations(
         },
     );
     Ok(out)
+}
+
+/// The metric bundle adjustment of [`fit_observations`] (step 4) started from a given
+/// perspective model `start` (pixel units, as [`PerspectiveModel`] holds them) instead of
+/// the chained windows: to refine a known reconstruction on a long sparse table, or to
+/// measure the accuracy floor of a synthetic sequence (the adjustment started at the truth).
+///
+/// Objective as [`fit_observations`]: `Σ ρ(‖π(K, R_f, t_f, X_p) − w_fp‖²)` over the observed
+/// entries, the focal length(s) free unless `cfg` gives one. Cost per iteration
+/// `O(n_obs + F b² c³)` (banded reduced camera system, half-bandwidth `b` frames), memory
+/// linear in the observations.
+///
+/// Errors: as [`fit_observations`] for the table; [`Error::Dimension`] when `start` does
+/// not have `n_frames` cameras and `n_tracks` points.
+pub fn refine_observations(
+    obs: &[Observation],
+    n_frames: usize,
+    n_tracks: usize,
+    start: &PerspectiveModel,
+    cfg: &PerspectiveConfig,
+    observer: &mut dyn Observer,
+) -> Result<PerspectiveFit> {
+    cfg.validate()?;
+    let cams_ok = start.rotations.len() == n_frames
+        && start.translations.len() == n_frames
+        && (start.focal_px.len() == n_frames || start.focal_px.len() == 1);
+    if !cams_ok || start.points.len() != n_tracks {
+        return Err(Error::Dimension {
+            context: "perspective::refine_observations: the start vs the table",
+            expected: format!("{n_frames} frames, {n_tracks} tracks"),
+            got: format!(
+                "{} rotations, {} translations, {} focal lengths, {} points",
+                start.rotations.len(),
+                start.translations.len(),
+                start.focal_px.len(),
+                start.points.len()
+            ),
+        });
+    }
+    let order = projective::observation_order(obs, n_frames, n_tracks)?;
+    let assumed = assumed_frame_of(obs.iter().map(|o| o.xy), &cfg.intrinsics);
+    let norm = Normalization {
+        centre: assumed.principal_point,
+        scale: 1.0 / assumed.scale,
+    };
+    let g = projective::observation_graph(obs, &order, n_frames, n_tracks, &norm);
+    drop(order);
+    projective::check_graph(&g)?;
+    let mut start = start.clone();
+    if start.focal_px.len() == 1 {
+        start.focal_px = vec![start.focal_px[0]; n_frames];
+    }
+    let estimate_pp = cfg.estimates_principal_point(&assumed);
+    adjust_graph(
+        &g,
+        start,
+        &long_adjustment(cfg),
+        &assumed,
+        estimate_pp,
+        0,
+        observer,
+    )
+}
+
+/// The settings of the long path's global adjustment: `cfg` with
+/// [`PerspectiveConfig::long_geodesic_acceleration`] when its own is 0.
+fn long_adjustment(cfg: &PerspectiveConfig) -> PerspectiveConfig {
+    let mut c = cfg.clone();
+    if c.bundle.geodesic_acceleration == 0.0 && cfg.long_geodesic_acceleration > 0.0 {
+        c.bundle.geodesic_acceleration = cfg.long_geodesic_acceleration;
+    }
+    c
 }
 
 /// Steps 1–3 of [`fit_observations`] on the graph `g` (normalised: principal point at 0,
