@@ -226,6 +226,10 @@ pub fn affine_start(g: &Graph, cfg: &WindowConfig) -> Result<(Vec<f64>, Vec<f64>
 /// After each window it sends an [`Event::Iteration`] (solver `"windows"`, iteration = the
 /// window's index) with the reprojection RMS of the window's observations in the chained
 /// frame (`px` converts the graph's units to pixels): a chain that breaks shows where.
+///
+/// Returns the cameras and points with which route they took
+/// ([`ProjectiveStart::on_reference`]): the global adjustment from the reference gets
+/// [`WindowConfig::reference_geodesic_acceleration`].
 pub fn projective_start(
     g: &Graph,
     cfg: &WindowConfig,
