@@ -76,16 +76,8 @@ pub fn fit_observations(
 ) -> Result<PerspectiveFit> {
     cfg.validate()?;
     projective_cfg.validate()?;
-    let order = projective::observation_order(obs, n_frames, n_tracks)?;
-    let assumed = assumed_frame_of(obs.iter().map(|o| o.xy), &cfg.intrinsics);
+    let (g, assumed) = table_graph(obs, n_frames, n_tracks, cfg)?;
     let s = assumed.scale;
-    let norm = Normalization {
-        centre: assumed.principal_point,
-        scale: 1.0 / s,
-    };
-    let g = projective::observation_graph(obs, &order, n_frames, n_tracks, &norm);
-    drop(order);
-    projective::check_graph(&g)?;
     let t0 = std::time::Instant::now();
     observer.on_event(&crate::Event::StageStarted { stage: "windows" });
     let (focal, (rotations, translations, mut points, placed)) =
@@ -105,9 +97,7 @@ pub fn fit_observations(
         translations,
         points,
     };
-    let estimate_pp = cfg.estimates_principal_point(&assumed);
-    let cfg = &long_adjustment(cfg);
-    let mut out = adjust_graph(&g, start, cfg, &assumed, estimate_pp, 0, observer)?;
+    let mut out = adjust_long(&g, start, cfg, &assumed, observer)?;
     out.stages.insert(
         0,
         projective::StageReport {
@@ -159,6 +149,23 @@ pub fn refine_observations(
             ),
         });
     }
+    let (g, assumed) = table_graph(obs, n_frames, n_tracks, cfg)?;
+    let mut start = start.clone();
+    if start.focal_px.len() == 1 {
+        start.focal_px = vec![start.focal_px[0]; n_frames];
+    }
+    adjust_long(&g, start, cfg, &assumed, observer)
+}
+
+/// The camera–point graph of a sparse table, its positions normalised by the frame
+/// `cfg.intrinsics` assume (principal point, scale), and that frame; the table's input
+/// errors as [`projective::fit_observations`]. `O(n log n)`.
+fn table_graph(
+    obs: &[Observation],
+    n_frames: usize,
+    n_tracks: usize,
+    cfg: &PerspectiveConfig,
+) -> Result<(projective::bundle::Graph, super::Assumed)> {
     let order = projective::observation_order(obs, n_frames, n_tracks)?;
     let assumed = assumed_frame_of(obs.iter().map(|o| o.xy), &cfg.intrinsics);
     let norm = Normalization {
@@ -168,30 +175,25 @@ pub fn refine_observations(
     let g = projective::observation_graph(obs, &order, n_frames, n_tracks, &norm);
     drop(order);
     projective::check_graph(&g)?;
-    let mut start = start.clone();
-    if start.focal_px.len() == 1 {
-        start.focal_px = vec![start.focal_px[0]; n_frames];
-    }
-    let estimate_pp = cfg.estimates_principal_point(&assumed);
-    adjust_graph(
-        &g,
-        start,
-        &long_adjustment(cfg),
-        &assumed,
-        estimate_pp,
-        0,
-        observer,
-    )
+    Ok((g, assumed))
 }
 
-/// The settings of the long path's global adjustment: `cfg` with
-/// [`PerspectiveConfig::long_geodesic_acceleration`] when its own is 0.
-fn long_adjustment(cfg: &PerspectiveConfig) -> PerspectiveConfig {
-    let mut c = cfg.clone();
-    if c.bundle.geodesic_acceleration == 0.0 && cfg.long_geodesic_acceleration > 0.0 {
-        c.bundle.geodesic_acceleration = cfg.long_geodesic_acceleration;
-    }
-    c
+/// The long path's global adjustment (step 4 of [`fit_observations`]) of `start` on `g`:
+/// `cfg`'s, with [`PerspectiveConfig::long_geodesic_acceleration`] when `bundle`'s own
+/// geodesic acceleration is 0.
+fn adjust_long(
+    g: &projective::bundle::Graph,
+    start: PerspectiveModel,
+    cfg: &PerspectiveConfig,
+    assumed: &super::Assumed,
+    observer: &mut dyn Observer,
+) -> Result<PerspectiveFit> {
+    let estimate_pp = cfg.estimates_principal_point(assumed);
+    let cfg = PerspectiveConfig {
+        bundle: cfg.bundle.or_geodesic(cfg.long_geodesic_acceleration),
+        ..cfg.clone()
+    };
+    adjust_graph(g, start, &cfg, assumed, estimate_pp, 0, observer)
 }
 
 /// Steps 1–3 of [`fit_observations`] on the graph `g` (normalised: principal point at 0,

@@ -302,6 +302,19 @@ fn default_noise_tolerance() -> f64 {
     0.01
 }
 
+impl LmConfig {
+    /// These settings with geodesic acceleration `alpha` where they have none
+    /// (`geodesic_acceleration` = 0): for an adjustment whose start is known to leave a
+    /// long, curved tail (a chain of metric windows), while an explicit setting wins.
+    pub(crate) fn or_geodesic(&self, alpha: f64) -> LmConfig {
+        let mut c = self.clone();
+        if c.geodesic_acceleration == 0.0 && alpha > 0.0 {
+            c.geodesic_acceleration = alpha;
+        }
+        c
+    }
+}
+
 impl Default for LmConfig {
     fn default() -> Self {
         Self {

@@ -651,13 +651,13 @@ pub fn fit_observations(
     // Started on the metric reference, the adjustment follows the chain's soft modes from
     // the reference's shape: geodesic acceleration (WindowConfig's setting).
     let accelerated;
-    let cfg = if on_reference
-        && cfg.refine.geodesic_acceleration == 0.0
-        && windows.reference_geodesic_acceleration > 0.0
-    {
-        let mut c = cfg.clone();
-        c.refine.geodesic_acceleration = windows.reference_geodesic_acceleration;
-        accelerated = c;
+    let cfg = if on_reference {
+        accelerated = ProjectiveConfig {
+            refine: cfg
+                .refine
+                .or_geodesic(windows.reference_geodesic_acceleration),
+            ..cfg.clone()
+        };
         &accelerated
     } else {
         cfg
