@@ -19,7 +19,9 @@ use super::{
 };
 use crate::error::{Error, Result};
 use crate::projective::windowed::{self, WindowConfig};
-use crate::projective::{self, AffineStart, Normalization, Observation, ProjectiveConfig};
+use crate::projective::{
+    self, AffineStart, Normalization, Observation, ProjectiveConfig, ProjectiveFit, ProjectiveModel,
+};
 use crate::{Measurements, NoopObserver, Observer};
 
 /// One window of frames ([`windowed::collect_windows`]) and its metric fit (normalised
@@ -47,7 +49,9 @@ struct Window {
 ///    [`PerspectiveConfig::focal_grid`], mirrored or not) screened and the best adjusted.
 /// 2. Unless the focal length is given, the median of the windows' focal lengths is the
 ///    sequence's, and every window is adjusted again with it held fixed (windows with
-///    their own focal lengths would not chain into one metric frame).
+///    their own focal lengths would not chain into one metric frame). Beyond
+///    [`FOCAL_SAMPLE`] windows only that many, spread evenly, are fitted in step 1 with a
+///    free focal length; the others are fitted once, with the sequence's held fixed.
 /// 3. The windows are chained by the similarity (Umeyama, no reflection: the perspective
 ///    camera has no depth reversal) that carries their points onto the tracks already
 ///    placed, anchored on the tracks seen in ≥ [`WindowConfig::min_anchor_observations`]
@@ -56,8 +60,8 @@ struct Window {
 /// 4. One metric bundle adjustment of everything ([`super::adjust`]'s, on the sparse
 ///    camera–point graph), the focal length free unless given.
 ///
-/// Cost: the windows `O(F)` small dense fits (two per window when the focal length is
-/// estimated); each adjustment iteration `O(n_obs + F b² c³)` for a half-bandwidth of `b`
+/// Cost: the windows `O(F)` small dense fits (one per window, and one more for each of
+/// the [`FOCAL_SAMPLE`] windows that estimate the focal length); each adjustment iteration `O(n_obs + F b² c³)` for a half-bandwidth of `b`
 /// frames and `c` = 6 parameters per camera; memory linear in the observations (the
 /// windows' dense measurements are `O(n_obs · window)` in total).
 ///
@@ -81,7 +85,7 @@ pub fn fit_observations(
     let t0 = std::time::Instant::now();
     observer.on_event(&crate::Event::StageStarted { stage: "windows" });
     let (focal, (rotations, translations, mut points, placed)) =
-        chain_windows(&g, s, cfg, projective_cfg, windows)?;
+        chain_windows(&g, s, cfg, projective_cfg, windows, None)?;
     place_unplaced(&g, focal, &rotations, &translations, &mut points, &placed);
     let seconds = t0.elapsed().as_secs_f64();
     observer.on_event(&crate::Event::StageFinished {
@@ -205,6 +209,7 @@ fn chain_windows(
     cfg: &PerspectiveConfig,
     projective_cfg: &ProjectiveConfig,
     windows: &WindowConfig,
+    own: Option<&OwnFits<'_>>,
 ) -> Result<(f64, Chained)> {
     let mut list: Vec<Window> = windowed::collect_windows(g, windows)?
         .into_iter()
@@ -216,6 +221,12 @@ fn chain_windows(
             fit: Err("not fitted".into()),
         })
         .collect();
+    // The caller's projective fits of the same windows, in this graph's units; a missing
+    // one, or one far above the others (a local minimum), is fitted again.
+    let own_models: Vec<Option<ProjectiveModel>> = match own {
+        Some(o) if o.fits.len() == list.len() => o.usable(),
+        _ => vec![None; list.len()],
+    };
     // Window settings in the graph's normalised units: principal point 0, scale 1.
     let window_cfg = |focal: Option<f64>| PerspectiveConfig {
         intrinsics: Intrinsics {
@@ -236,21 +247,47 @@ fn chain_windows(
     };
     let known = cfg.intrinsics.focal_px.map(|f| f / s);
     let first_cfg = window_cfg(known);
-    let fits: Vec<_> = list
-        .par_iter()
-        .map(|w| fit_window(w, windows, projective_cfg, &first_cfg).map_err(|e| e.to_string()))
-        .collect();
-    for (w, f) in list.iter_mut().zip(fits) {
-        w.fit = f;
-    }
+    // With the focal length given every window is fitted with it; otherwise a sample of
+    // the windows estimates it (all of them when none of the sample fits).
+    let sample = match known {
+        Some(_) => vec![true; list.len()],
+        None => focal_sample(list.len()),
+    };
+    let fit_free = |list: &mut [Window], which: &(dyn Fn(usize) -> bool + Sync)| {
+        let fits: Vec<_> = list
+            .par_iter()
+            .zip(&own_models)
+            .enumerate()
+            .map(|(i, (w, own))| {
+                if which(i) {
+                    fit_window(w, own.as_ref(), windows, projective_cfg, &first_cfg)
+                        .map_err(|e| e.to_string())
+                } else {
+                    Err("not fitted".into())
+                }
+            })
+            .collect();
+        for (i, (w, f)) in list.iter_mut().zip(fits).enumerate() {
+            if which(i) {
+                w.fit = f;
+            }
+        }
+    };
+    fit_free(&mut list, &|i| sample[i]);
     let focal = match known {
         Some(f) => f,
         None => {
-            let mut f: Vec<f64> = list
-                .iter()
-                .filter_map(|w| w.fit.as_ref().ok().map(|m| m.focal_px[0]))
-                .filter(|f| f.is_finite() && *f > 0.0)
-                .collect();
+            let focals = |list: &[Window]| -> Vec<f64> {
+                list.iter()
+                    .filter_map(|w| w.fit.as_ref().ok().map(|m| m.focal_px[0]))
+                    .filter(|f| f.is_finite() && *f > 0.0)
+                    .collect()
+            };
+            let mut f = focals(&list);
+            if f.is_empty() && sample.iter().any(|&k| !k) {
+                fit_free(&mut list, &|i| !sample[i]);
+                f = focals(&list);
+            }
             if f.is_empty() {
                 return Err(Error::Degenerate(
                     "no window of frames could be reconstructed in perspective".into(),
@@ -262,11 +299,13 @@ fn chain_windows(
             let fixed = window_cfg(Some(median));
             let refits: Vec<_> =
                 list.par_iter()
-                    .map(|w| {
+                    .zip(&own_models)
+                    .map(|(w, own)| {
+                        let own = own.as_ref();
                         match &w.fit {
                             Ok(m) => super::adjust(&w.meas, m, &fixed, 0, &mut NoopObserver)
                                 .map(|r| r.model),
-                            Err(_) => fit_window(w, windows, projective_cfg, &fixed),
+                            Err(_) => fit_window(w, own, windows, projective_cfg, &fixed),
                         }
                         .map_err(|e| e.to_string())
                     })
@@ -303,6 +342,10 @@ const REFERENCE_ITERATIONS: usize = 10;
 /// chain of projective windows drifts in the 15-dimensional group of homographies, and a
 /// thousand such links leave the early frames numerically lost in the last one's frame.
 ///
+/// `own`: the windows' projective fits when the caller has them (the projective chain's
+/// first pass, in `g`'s units): each window's metric fit then starts from its own instead
+/// of fitting it again (on a 2 000-frame corridor a fifth of the reference's time).
+///
 /// Cost: as steps 1–3 of [`fit_observations`]: `O(F)` small window fits; memory a copy of
 /// `g`'s positions plus the windows' measurements.
 pub(crate) fn metric_reference(
@@ -310,6 +353,7 @@ pub(crate) fn metric_reference(
     px: f64,
     projective_cfg: &ProjectiveConfig,
     windows: &WindowConfig,
+    own: Option<&[std::result::Result<ProjectiveFit, String>]>,
 ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>)> {
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for w in &g.w {
@@ -338,8 +382,29 @@ pub(crate) fn metric_reference(
     let cfg = PerspectiveConfig::default();
     // Pixels per local unit.
     let sp = side * px;
-    let (focal, (rotations, translations, points, placed)) =
-        chain_windows(&local, sp, &cfg, projective_cfg, windows)?;
+    let (focal, (rotations, translations, points, placed)) = chain_windows(
+        &local,
+        sp,
+        &cfg,
+        projective_cfg,
+        windows,
+        own.map(|fits| OwnFits {
+            fits,
+            // w_local = (w − pp) / side.
+            to_local: Matrix3::new(
+                1.0 / side,
+                0.0,
+                -pp[0] / side,
+                0.0,
+                1.0 / side,
+                -pp[1] / side,
+                0.0,
+                0.0,
+                1.0,
+            ),
+        })
+        .as_ref(),
+    )?;
     // A few iterations of the metric adjustment: the chained windows disagree by a few
     // pixels where they meet (1.7 px RMS on a 300-frame corridor, 0.47 px after it), and
     // each projective window is mapped onto these points.
@@ -423,9 +488,11 @@ pub(crate) fn metric_reference(
     Ok((cams, pts, placed))
 }
 
-/// A window's metric fit from scratch (normalised units; `cfg` its settings).
+/// A window's metric fit from scratch (normalised units; `cfg` its settings), from its
+/// projective fit `own` when one is given (else fitted here).
 fn fit_window(
     w: &Window,
+    own: Option<&ProjectiveModel>,
     windows: &WindowConfig,
     projective_cfg: &ProjectiveConfig,
     cfg: &PerspectiveConfig,
@@ -438,39 +505,121 @@ fn fit_window(
         windows,
         crate::CameraModel::ScaledOrthographic,
     )?;
-    let c = &mw.affine;
-    let pcfg = ProjectiveConfig {
-        refine: crate::projective::bundle::LmConfig {
-            max_iterations: cfg.projective_iterations,
-            ..projective_cfg.refine.clone()
-        },
-        ..projective_cfg.clone()
+    let fitted;
+    let proj = match own {
+        Some(m) => m,
+        None => {
+            let c = &mw.affine;
+            let pcfg = ProjectiveConfig {
+                refine: crate::projective::bundle::LmConfig {
+                    max_iterations: cfg.projective_iterations,
+                    ..projective_cfg.refine.clone()
+                },
+                ..projective_cfg.clone()
+            };
+            fitted = projective::fit(
+                &w.meas,
+                AffineStart {
+                    m: c.m.as_ref(),
+                    s: c.s.as_ref(),
+                    t: &c.t,
+                },
+                &pcfg,
+                0,
+                &mut NoopObserver,
+            )?
+            .model;
+            &fitted
+        }
     };
-    let proj = projective::fit(
-        &w.meas,
-        AffineStart {
-            m: c.m.as_ref(),
-            s: c.s.as_ref(),
-            t: &c.t,
-        },
-        &pcfg,
-        0,
-        &mut NoopObserver,
-    )?;
     // The starts of super::fit: the self-calibration, and the window's scaled orthographic
     // model lifted at several focal lengths, mirrored or not (the self-calibration of a
     // window with weak perspective can land on the depth-reversed reconstruction).
     let affine = mw.model();
-    Ok(super::fit(
-        &w.meas,
-        &proj.model,
-        Some(&affine),
-        cfg,
-        0,
-        &mut NoopObserver,
-    )?
-    .model)
+    Ok(super::fit(&w.meas, proj, Some(&affine), cfg, 0, &mut NoopObserver)?.model)
 }
+
+/// Windows fitted with a free focal length, at most, when the sequence's is not given
+/// ([`focal_sample`]): their median is the sequence's focal length, and the other windows
+/// are fitted with it held fixed — three screened starts each ([`super::fit`] with a known
+/// focal length: the self-calibration and the affine lift, mirrored or not) against seven,
+/// and no second adjustment. Below this many windows every window is in the sample (the
+/// results of sequences up to ~650 frames are those of fitting every window).
+const FOCAL_SAMPLE: usize = 32;
+
+/// Which of `n` windows estimate the sequence's focal length: all of them up to
+/// [`FOCAL_SAMPLE`], else [`FOCAL_SAMPLE`] spread evenly from the first to the last.
+fn focal_sample(n: usize) -> Vec<bool> {
+    if n <= FOCAL_SAMPLE {
+        return vec![true; n];
+    }
+    let mut keep = vec![false; n];
+    for j in 0..FOCAL_SAMPLE {
+        keep[(j * (n - 1) + (FOCAL_SAMPLE - 1) / 2) / (FOCAL_SAMPLE - 1)] = true;
+    }
+    keep
+}
+
+/// Projective fits of the same windows ([`windowed::collect_windows`] of the same graph
+/// and [`WindowConfig`]) that a caller already has — the first pass of
+/// [`windowed::projective_start`] — in its graph's units, and the 3×3 map `to_local` of
+/// those image units to the ones [`metric_reference`] works in (`P ↦ to_local · P`).
+pub(crate) struct OwnFits<'a> {
+    pub fits: &'a [std::result::Result<ProjectiveFit, String>],
+    pub to_local: Matrix3<f64>,
+}
+
+impl OwnFits<'_> {
+    /// Each window's projective model in the local units, or `None` where its fit failed
+    /// or ended above [`OWN_FIT_RATIO`] times the (lower) median window's RMS (the window is then
+    /// fitted again from its affine completion).
+    fn usable(&self) -> Vec<Option<ProjectiveModel>> {
+        let mut rms: Vec<f64> = self
+            .fits
+            .iter()
+            .filter_map(|f| f.as_ref().ok().map(|f| f.rms_px))
+            .filter(|r| r.is_finite())
+            .collect();
+        rms.sort_by(f64::total_cmp);
+        // The lower median (of two fits, the better one).
+        let median = rms
+            .get(rms.len().saturating_sub(1) / 2)
+            .copied()
+            .unwrap_or(f64::NAN);
+        self.fits
+            .iter()
+            .map(|f| {
+                let f = f.as_ref().ok()?;
+                if !(f.rms_px <= OWN_FIT_RATIO * median) {
+                    return None;
+                }
+                let a = &self.to_local;
+                let cameras = f
+                    .model
+                    .cameras
+                    .iter()
+                    .map(|p| {
+                        let mut q = [0.0; 12];
+                        for r in 0..3 {
+                            for c in 0..4 {
+                                q[4 * r + c] = (0..3).map(|k| a[(r, k)] * p[4 * k + c]).sum();
+                            }
+                        }
+                        q
+                    })
+                    .collect();
+                Some(ProjectiveModel {
+                    cameras,
+                    points: f.model.points.clone(),
+                })
+            })
+            .collect()
+    }
+}
+
+/// A caller's projective window fit above this many times the median window's RMS is not
+/// reused ([`OwnFits::usable`]); as the projective chain's failed-window rule.
+const OWN_FIT_RATIO: f64 = 3.0;
 
 type Chained = (
     Vec<Matrix3<f64>>,
@@ -601,6 +750,10 @@ mod tests {
     /// projective graph's units, reproject every placed track to within a tenth of a pixel
     /// of its observations, and its points are the truth up to a similarity to within 1 %
     /// of their spread (a drifted chain would be off by pixels and by tens of %).
+    ///
+    /// Both ways: each window's projective fit made here, and the windows' projective fits
+    /// given (as the projective chain's first pass gives them), one of them failed and one
+    /// far off (both fitted again).
     #[test]
     fn the_metric_reference_reprojects_a_noise_free_corridor() {
         let frames = 80;
@@ -610,13 +763,62 @@ mod tests {
         let norm = Normalization::of_points(|| obs.iter().map(|o| o.xy));
         let g = projective::observation_graph(&obs, &order, frames, n_tracks, &norm);
         let px = 1.0 / norm.scale;
-        let (cams, pts, placed) = metric_reference(
-            &g,
-            px,
-            &ProjectiveConfig::default(),
-            &WindowConfig::default(),
-        )
-        .unwrap();
+        let (wcfg, pcfg) = (WindowConfig::default(), ProjectiveConfig::default());
+        let mut own: Vec<std::result::Result<ProjectiveFit, String>> =
+            windowed::collect_windows(&g, &wcfg)
+                .unwrap()
+                .iter()
+                .map(|(start, end, tracks, meas)| {
+                    windowed::fit_window(*start, *end, tracks, meas, &wcfg, &pcfg)
+                        .map_err(|e| e.to_string())
+                })
+                .collect();
+        assert!(own.len() >= 3 && own.iter().all(|f| f.is_ok()));
+        own[1] = Err("failed".into());
+        if let Some(Ok(f)) = own.last_mut() {
+            f.rms_px = 1e3;
+            f.model.points.iter_mut().for_each(|x| x[0] += 1.0);
+        }
+        // The given fits, mapped into other image units, reproject the windows' measurements
+        // mapped likewise; the failed and the far-off ones are not used.
+        let to_local = Matrix3::new(2.5, 0.0, 0.3, 0.0, 2.5, -0.7, 0.0, 0.0, 1.0);
+        let used = OwnFits {
+            fits: &own,
+            to_local,
+        }
+        .usable();
+        assert!(used[1].is_none() && used[used.len() - 1].is_none());
+        for ((_, _, tracks, meas), m) in windowed::collect_windows(&g, &wcfg)
+            .unwrap()
+            .iter()
+            .zip(&used)
+        {
+            let Some(m) = m else { continue };
+            for (i, _) in meas.visible.iter().enumerate().filter(|v| *v.1) {
+                let (f, k) = (i / tracks.len(), i % tracks.len());
+                let y = projective::project(&m.cameras[f], &m.points[k]);
+                let w = to_local * Vector3::new(meas.w[(2 * f, k)], meas.w[(2 * f + 1, k)], 1.0);
+                assert!((y[0] - w[0]).hypot(y[1] - w[1]) < 1e-6, "{y:?} vs {w:?}");
+            }
+        }
+        for given in [None, Some(&own[..])] {
+            check_reference(
+                &g,
+                px,
+                &truth,
+                metric_reference(&g, px, &pcfg, &wcfg, given),
+            );
+        }
+    }
+
+    fn check_reference(
+        g: &projective::bundle::Graph,
+        px: f64,
+        truth: &[Vector3<f64>],
+        reference: Result<(Vec<f64>, Vec<f64>, Vec<bool>)>,
+    ) {
+        let n_tracks = truth.len();
+        let (cams, pts, placed) = reference.unwrap();
         let mut worst: f64 = 0.0;
         let (mut est, mut tru) = (Vec::new(), Vec::new());
         for p in (0..n_tracks).filter(|&p| placed[p]) {
@@ -640,5 +842,24 @@ mod tests {
         assert!(worst < 0.1, "worst reprojection {worst} px");
         let a = crate::eval::align_similarity(&est, &tru, false).unwrap();
         assert!(a.relative_rms < 0.01, "structure off by {}", a.relative_rms);
+    }
+
+    /// The focal length's sample: every window up to [`FOCAL_SAMPLE`]; beyond, exactly
+    /// [`FOCAL_SAMPLE`] of them, the first and the last included, evenly spread.
+    #[test]
+    fn the_focal_sample_spreads_over_the_sequence() {
+        for n in [0, 1, 5, FOCAL_SAMPLE] {
+            assert!(focal_sample(n).iter().all(|&k| k) && focal_sample(n).len() == n);
+        }
+        for n in [FOCAL_SAMPLE + 1, 99, 999, 5000] {
+            let k = focal_sample(n);
+            let idx: Vec<usize> = (0..n).filter(|&i| k[i]).collect();
+            assert_eq!(idx.len(), FOCAL_SAMPLE, "n = {n}");
+            assert_eq!((idx[0], idx[FOCAL_SAMPLE - 1]), (0, n - 1));
+            let step = (n - 1) as f64 / (FOCAL_SAMPLE - 1) as f64;
+            for w in idx.windows(2) {
+                assert!(((w[1] - w[0]) as f64 - step).abs() <= 1.0, "n = {n}: {w:?}");
+            }
+        }
     }
 }

@@ -275,7 +275,7 @@ pub fn projective_start(
     observer.on_event(&Event::StageStarted {
         stage: "metric-reference",
     });
-    let reference = crate::perspective::long::metric_reference(g, px, pcfg, cfg);
+    let reference = crate::perspective::long::metric_reference(g, px, pcfg, cfg, Some(&fits));
     observer.on_event(&Event::StageFinished {
         stage: "metric-reference",
         seconds: t0.elapsed().as_secs_f64(),
@@ -810,7 +810,7 @@ fn map_point(x: &mut [f64], m: &Matrix4<f64>) {
 
 /// One window's own projective fit: its affine completion, then [`super::fit`] (`pcfg`'s
 /// bridge and bundle adjustment), errors naming the window.
-fn fit_window(
+pub(crate) fn fit_window(
     start: usize,
     end: usize,
     tracks: &[usize],
