@@ -61,8 +61,9 @@ struct Window {
 ///    camera–point graph), the focal length free unless given.
 ///
 /// Cost: the windows `O(F)` small dense fits (one per window, and one more for each of
-/// the [`FOCAL_SAMPLE`] windows that estimate the focal length); each adjustment iteration `O(n_obs + F b² c³)` for a half-bandwidth of `b`
-/// frames and `c` = 6 parameters per camera; memory linear in the observations (the
+/// the [`FOCAL_SAMPLE`] windows that estimate the focal length); each adjustment
+/// iteration `O(n_obs + F b² c³)` for a half-bandwidth of `b` frames and `c` = 6
+/// parameters per camera; memory linear in the observations (the
 /// windows' dense measurements are `O(n_obs · window)` in total).
 ///
 /// Returns the perspective fit; its `starts` is empty and its `selfcal` `None` (each
@@ -344,7 +345,8 @@ const REFERENCE_ITERATIONS: usize = 10;
 ///
 /// `own`: the windows' projective fits when the caller has them (the projective chain's
 /// first pass, in `g`'s units): each window's metric fit then starts from its own instead
-/// of fitting it again (on a 2 000-frame corridor a fifth of the reference's time).
+/// of fitting it again (with [`FOCAL_SAMPLE`], the reference's time on a 2 000-frame
+/// corridor 62.8 → 33.2 s).
 ///
 /// Cost: as steps 1–3 of [`fit_observations`]: `O(F)` small window fits; memory a copy of
 /// `g`'s positions plus the windows' measurements.

@@ -220,8 +220,9 @@ pub fn affine_start(g: &Graph, cfg: &WindowConfig) -> Result<(Vec<f64>, Vec<f64>
 /// optimum, 0.4632 px, in 16 solves against the chain's 12).
 ///
 /// Cost: one window's projective fit per `stride` frames: linear in the frames; with a
-/// reference, the perspective windows (about as many fits again), `O(n_obs)` per metric
-/// iteration, and the windows' own fits kept (`O(window · tracks)` each).
+/// reference, the perspective windows (each upgraded from the window's own projective fit,
+/// kept from the first pass: `O(window · tracks)` memory each), `O(n_obs)` per metric
+/// iteration.
 ///
 /// After each window it sends an [`Event::Iteration`] (solver `"windows"`, iteration = the
 /// window's index) with the reprojection RMS of the window's observations in the chained
