@@ -91,7 +91,9 @@ pub enum Error {
     /// any single reconstruction would be a confident wrong model.
     #[error(
         "no rigid majority ({reason}): the best rigid group holds {:.0} % of the tracks \
-         (at least {:.0} % needed), a rival group {:.0} %",
+         (at least {:.0} % needed), a rival group {:.0} % — several moving objects \
+         (`--objects auto` reconstructs each) or a perspective view that an affine camera \
+         cannot explain (`--camera auto` or `perspective`) look like this",
         100.0 * inlier_fraction,
         100.0 * min_inlier_fraction,
         100.0 * rival_fraction

@@ -8,7 +8,10 @@
 //! `aᵀLb = a0b0·L00 + (a0b1+a1b0)·L01 + (a0b2+a2b0)·L02 + a1b1·L11 + (a1b2+a2b1)·L12 + a2b2·L22`.
 //!
 //! * **Orthographic** (Tomasi & Kanade 1992): per frame `îᵀLî = 1`, `ĵᵀLĵ = 1`, `îᵀLĵ = 0`;
-//!   `min ‖A l − b‖²` over the 3F rows by linear least squares (QR).
+//!   `min ‖A l − b‖²` over the 3F rows by linear least squares (QR). At least 3 frames:
+//!   two orthographic views leave a one-parameter family of structures (Ullman, "The
+//!   interpretation of visual motion", MIT Press 1979), and their 6 equations in the 6
+//!   unknowns of `L` are dependent.
 //! * **Scaled orthographic** (Poelman & Kanade 1997, §4): per frame `îᵀLî − ĵᵀLĵ = 0`,
 //!   `îᵀLĵ = 0`, plus one normalization `(1/2F) Σ_f (îᵀLî + ĵᵀLĵ) = 1` (mean squared scale
 //!   1); `min ‖A l‖²` subject to that equality, solved through its KKT system.
@@ -113,13 +116,9 @@ pub fn upgrade(
         });
     }
     let f = m_hat.nrows() / 2;
-    let needed = match camera {
-        CameraModel::Orthographic => 2,
-        CameraModel::ScaledOrthographic
-        | CameraModel::Projective
-        | CameraModel::Perspective
-        | CameraModel::Auto => 3,
-    };
+    // Every model needs 3 frames: two orthographic views leave a one-parameter family of
+    // structures (module documentation), two scaled orthographic ones more.
+    let needed = 3;
     if f < needed {
         return Err(Error::TooFew {
             what: "frames for the metric upgrade",

@@ -1401,8 +1401,39 @@ fn robust_stage(
             counts: &mut counts,
         };
         robust::robust_filter_observed(&meas_all, rc, &mut rng, &mut capture)
-    })?;
+    });
+    // A table too small (or too sparse) for the robust pass to judge is fitted whole: it
+    // says nothing against the data, and the fit's own checks still apply.
+    let skipped = |why: String, warnings: &mut Vec<String>| {
+        warnings.push(format!(
+            "robust pass skipped: {why}; every track is fitted (an outlier among them cannot \
+             be detected)"
+        ));
+    };
+    let r = match r {
+        Err(e @ Error::TooFew { .. }) => {
+            skipped(e.to_string(), warnings);
+            return Ok(sel);
+        }
+        r => r?,
+    };
     let mut other_object_tracks = 0;
+    // No hypothesis at all is no verdict on the tracks (the projective model judges them
+    // below, as without a rigid majority).
+    if let robust::Verdict::NoRigidMajority {
+        reason: robust::NoMajorityReason::NoHypothesis,
+        ..
+    } = &r.verdict
+        && !config.camera.is_projective()
+    {
+        skipped(
+            "no non-degenerate sample of 4 tracks could be drawn or fitted (too few tracks \
+             share frames)"
+                .into(),
+            warnings,
+        );
+        return Ok(sel);
+    }
     if let robust::Verdict::NoRigidMajority {
         reason,
         inlier_fraction,
@@ -1477,8 +1508,11 @@ fn robust_stage(
         });
         if let Some(f) = (0..nf).find(|&f| selected[f] < 6 && all[f] >= 6) {
             warnings.push(format!(
-                "the affine robust pass leaves {} track(s) in frame {} (of {}), fewer than a                  projective camera needs (6); the projective model judges every track instead",
-                selected[f], kept.table.frame_ids()[f], all[f]
+                "the affine robust pass leaves {} track(s) in frame {} (of {}), fewer than a \
+                 projective camera needs (6); the projective model judges every track instead",
+                selected[f],
+                kept.table.frame_ids()[f],
+                all[f]
             ));
             sel.inlier = vec![true; n];
             sel.flagged.clear();

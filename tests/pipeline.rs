@@ -433,6 +433,62 @@ fn too_small_tables_are_errors() {
     ));
 }
 
+/// A table too small for the robust pass (7 tracks, or tracks that share too few frames
+/// for any 4-track sample) is still reconstructed, with the default settings: the robust
+/// pass is skipped with a warning that says why, and the fit is exact on noise-free data.
+/// Two frames are a typed error for every affine model (two orthographic views leave a
+/// one-parameter family of structures), never a numerical failure.
+#[test]
+fn a_table_too_small_for_the_robust_pass_is_fitted_without_it() {
+    for camera in [CameraModel::Orthographic, CameraModel::ScaledOrthographic] {
+        let scene = generate(&SynthConfig {
+            camera,
+            noise: 0.0,
+            frames: 12,
+            points: 7,
+            seed: 3,
+            ..Default::default()
+        })
+        .unwrap();
+        let cfg = Config {
+            camera,
+            ..Config::default()
+        };
+        let rec = Reconstruction::from_tracks(&scene.table, &cfg).unwrap();
+        assert!(rec.rms_px < 1e-9, "{camera}: rms {}", rec.rms_px);
+        assert!(rec.robust.is_none(), "{camera}: a robust report");
+        let w = rec
+            .warnings
+            .iter()
+            .find(|w| w.starts_with("robust pass skipped"))
+            .unwrap_or_else(|| panic!("{camera}: no warning in {:?}", rec.warnings));
+        assert!(w.contains("need at least 8, have 7"), "{w}");
+        assert_eq!(rec.points.len(), 7);
+        assert!(rec.points.iter().all(|p| p.inlier));
+        let e = structure_error(&points(&rec), &scene.truth.points);
+        assert!(e < 1e-9, "{camera}: structure error {e}");
+
+        let scene = generate(&SynthConfig {
+            camera,
+            noise: 0.0,
+            frames: 12,
+            points: 20,
+            seed: 3,
+            ..Default::default()
+        })
+        .unwrap();
+        let two = scene.table.select(&[0, 5], &(0..20).collect::<Vec<_>>());
+        match Reconstruction::from_tracks(&two, &cfg) {
+            Err(Error::TooFew {
+                what,
+                needed: 3,
+                have: 2,
+            }) if what.contains("metric upgrade") => {}
+            other => panic!("{camera}, two frames: {:?}", other.map(|r| r.rms_px)),
+        }
+    }
+}
+
 /// A clean Gaussian-cloud scene (small image spread relative to the noise) is rigid: the
 /// default pipeline, robust pass included, must reconstruct it and keep every track.
 #[test]
