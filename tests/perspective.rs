@@ -262,8 +262,16 @@ fn auto_keeps_frames_the_projective_stages_cannot_use() {
 /// similarities, one sparse adjustment) on the strong-perspective corridor of
 /// `synth::perspective_corridor`, the focal length self-calibrated.
 fn long_fit(frames: usize, per_frame: usize, noise: f64) -> (f64, f64, f64) {
+    long_fit_with(frames, per_frame, noise, PerspectiveConfig::default())
+}
+
+fn long_fit_with(
+    frames: usize,
+    per_frame: usize,
+    noise: f64,
+    mut cfg: PerspectiveConfig,
+) -> (f64, f64, f64) {
     let (obs, truth) = rank3::synth::perspective_corridor(frames, per_frame, noise, 7);
-    let mut cfg = PerspectiveConfig::default();
     // The generator's principal point; the image size alone would put it at the centre of
     // the pixel grid, (319.5, 239.5).
     cfg.intrinsics.principal_point = Some([320.0, 240.0]);
@@ -286,8 +294,23 @@ fn long_fit(frames: usize, per_frame: usize, noise: f64) -> (f64, f64, f64) {
 
 #[test]
 fn long_sequence_noise_free_is_recovered_exactly() {
-    // 100 frames: five windows chained.
+    // 100 frames: four windows chained.
     let (rms, focal, structure) = long_fit(100, 40, 0.0);
+    assert!(rms < 1e-6, "RMS {rms} px");
+    assert!((focal - 500.0).abs() < 1e-5 * 500.0, "focal {focal} px");
+    assert!(structure < 1e-6, "structure error {structure}");
+}
+
+/// Only two of the four windows estimate the focal length
+/// (`PerspectiveConfig::focal_sample_windows`); the other two are fitted once with the
+/// median held fixed, from their own starts: still exact.
+#[test]
+fn long_sequence_with_a_focal_sample_is_recovered_exactly() {
+    let cfg = PerspectiveConfig {
+        focal_sample_windows: 2,
+        ..PerspectiveConfig::default()
+    };
+    let (rms, focal, structure) = long_fit_with(100, 40, 0.0, cfg);
     assert!(rms < 1e-6, "RMS {rms} px");
     assert!((focal - 500.0).abs() < 1e-5 * 500.0, "focal {focal} px");
     assert!(structure < 1e-6, "structure error {structure}");

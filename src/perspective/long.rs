@@ -50,8 +50,9 @@ struct Window {
 /// 2. Unless the focal length is given, the median of the windows' focal lengths is the
 ///    sequence's, and every window is adjusted again with it held fixed (windows with
 ///    their own focal lengths would not chain into one metric frame). Beyond
-///    [`FOCAL_SAMPLE`] windows only that many, spread evenly, are fitted in step 1 with a
-///    free focal length; the others are fitted once, with the sequence's held fixed.
+///    [`PerspectiveConfig::focal_sample_windows`] windows only that many, spread evenly,
+///    are fitted in step 1 with a free focal length; the others are fitted once, with the
+///    sequence's held fixed.
 /// 3. The windows are chained by the similarity (Umeyama, no reflection: the perspective
 ///    camera has no depth reversal) that carries their points onto the tracks already
 ///    placed, anchored on the tracks seen in ≥ [`WindowConfig::min_anchor_observations`]
@@ -61,7 +62,7 @@ struct Window {
 ///    camera–point graph), the focal length free unless given.
 ///
 /// Cost: the windows `O(F)` small dense fits (one per window, and one more for each of
-/// the [`FOCAL_SAMPLE`] windows that estimate the focal length); each adjustment
+/// the windows that estimate the focal length); each adjustment
 /// iteration `O(n_obs + F b² c³)` for a half-bandwidth of `b` frames and `c` = 6
 /// parameters per camera; memory linear in the observations (the
 /// windows' dense measurements are `O(n_obs · window)` in total).
@@ -252,7 +253,7 @@ fn chain_windows(
     // the windows estimates it (all of them when none of the sample fits).
     let sample = match known {
         Some(_) => vec![true; list.len()],
-        None => focal_sample(list.len()),
+        None => focal_sample(list.len(), cfg.focal_sample_windows),
     };
     let fit_free = |list: &mut [Window], which: &(dyn Fn(usize) -> bool + Sync)| {
         let fits: Vec<_> = list
@@ -345,8 +346,8 @@ const REFERENCE_ITERATIONS: usize = 10;
 ///
 /// `own`: the windows' projective fits when the caller has them (the projective chain's
 /// first pass, in `g`'s units): each window's metric fit then starts from its own instead
-/// of fitting it again (with [`FOCAL_SAMPLE`], the reference's time on a 2 000-frame
-/// corridor 62.8 → 33.2 s).
+/// of fitting it again (with [`PerspectiveConfig::focal_sample_windows`], the reference's
+/// time on a 2 000-frame corridor 62.8 → 33.2 s).
 ///
 /// Cost: as steps 1–3 of [`fit_observations`]: `O(F)` small window fits; memory a copy of
 /// `g`'s positions plus the windows' measurements.
@@ -541,23 +542,23 @@ fn fit_window(
     Ok(super::fit(&w.meas, proj, Some(&affine), cfg, 0, &mut NoopObserver)?.model)
 }
 
-/// Windows fitted with a free focal length, at most, when the sequence's is not given
-/// ([`focal_sample`]): their median is the sequence's focal length, and the other windows
-/// are fitted with it held fixed — three screened starts each ([`super::fit`] with a known
-/// focal length: the self-calibration and the affine lift, mirrored or not) against seven,
-/// and no second adjustment. Below this many windows every window is in the sample (the
-/// results of sequences up to ~650 frames are those of fitting every window).
-const FOCAL_SAMPLE: usize = 32;
-
-/// Which of `n` windows estimate the sequence's focal length: all of them up to
-/// [`FOCAL_SAMPLE`], else [`FOCAL_SAMPLE`] spread evenly from the first to the last.
-fn focal_sample(n: usize) -> Vec<bool> {
-    if n <= FOCAL_SAMPLE {
+/// Which of `n` windows estimate the sequence's focal length
+/// ([`PerspectiveConfig::focal_sample_windows`] = `m`): all of them when `m` is 0 or
+/// `n ≤ m`, else `m` spread evenly from the first to the last (the middle one for `m` = 1).
+/// The others are fitted with the sample's median held fixed: three screened starts each
+/// ([`super::fit`] with a known focal length: the self-calibration and the affine lift,
+/// mirrored or not) against seven, and no second adjustment.
+fn focal_sample(n: usize, m: usize) -> Vec<bool> {
+    if m == 0 || n <= m {
         return vec![true; n];
     }
     let mut keep = vec![false; n];
-    for j in 0..FOCAL_SAMPLE {
-        keep[(j * (n - 1) + (FOCAL_SAMPLE - 1) / 2) / (FOCAL_SAMPLE - 1)] = true;
+    if m == 1 {
+        keep[(n - 1) / 2] = true;
+        return keep;
+    }
+    for j in 0..m {
+        keep[(j * (n - 1) + (m - 1) / 2) / (m - 1)] = true;
     }
     keep
 }
@@ -846,19 +847,20 @@ mod tests {
         assert!(a.relative_rms < 0.01, "structure off by {}", a.relative_rms);
     }
 
-    /// The focal length's sample: every window up to [`FOCAL_SAMPLE`]; beyond, exactly
-    /// [`FOCAL_SAMPLE`] of them, the first and the last included, evenly spread.
+    /// The focal length's sample: every window up to `m` (or with `m` = 0); beyond,
+    /// exactly `m` of them, the first and the last included, evenly spread.
     #[test]
     fn the_focal_sample_spreads_over_the_sequence() {
-        for n in [0, 1, 5, FOCAL_SAMPLE] {
-            assert!(focal_sample(n).iter().all(|&k| k) && focal_sample(n).len() == n);
+        for (n, m) in [(0, 32), (1, 32), (5, 32), (32, 32), (99, 0)] {
+            assert!(focal_sample(n, m).iter().all(|&k| k) && focal_sample(n, m).len() == n);
         }
-        for n in [FOCAL_SAMPLE + 1, 99, 999, 5000] {
-            let k = focal_sample(n);
+        assert_eq!(focal_sample(5, 1), [false, false, true, false, false]);
+        for (n, m) in [(33, 32), (99, 32), (999, 32), (5000, 32), (5, 2), (7, 3)] {
+            let k = focal_sample(n, m);
             let idx: Vec<usize> = (0..n).filter(|&i| k[i]).collect();
-            assert_eq!(idx.len(), FOCAL_SAMPLE, "n = {n}");
-            assert_eq!((idx[0], idx[FOCAL_SAMPLE - 1]), (0, n - 1));
-            let step = (n - 1) as f64 / (FOCAL_SAMPLE - 1) as f64;
+            assert_eq!(idx.len(), m, "n = {n}");
+            assert_eq!((idx[0], idx[m - 1]), (0, n - 1));
+            let step = (n - 1) as f64 / (m - 1) as f64;
             for w in idx.windows(2) {
                 assert!(((w[1] - w[0]) as f64 - step).abs() <= 1.0, "n = {n}: {w:?}");
             }
