@@ -394,17 +394,10 @@ pub(crate) fn metric_reference(
         own.map(|fits| OwnFits {
             fits,
             // w_local = (w − pp) / side.
-            to_local: Matrix3::new(
-                1.0 / side,
-                0.0,
-                -pp[0] / side,
-                0.0,
-                1.0 / side,
-                -pp[1] / side,
-                0.0,
-                0.0,
-                1.0,
-            ),
+            to_local: Normalization {
+                centre: pp,
+                scale: 1.0 / side,
+            },
         })
         .as_ref(),
     )?;
@@ -565,11 +558,11 @@ fn focal_sample(n: usize, m: usize) -> Vec<bool> {
 
 /// Projective fits of the same windows ([`windowed::collect_windows`] of the same graph
 /// and [`WindowConfig`]) that a caller already has — the first pass of
-/// [`windowed::projective_start`] — in its graph's units, and the 3×3 map `to_local` of
-/// those image units to the ones [`metric_reference`] works in (`P ↦ to_local · P`).
+/// [`windowed::projective_start`] — in its graph's units, and the similarity `to_local`
+/// of those image units to the ones [`metric_reference`] works in (`P ↦ T P`).
 pub(crate) struct OwnFits<'a> {
     pub fits: &'a [std::result::Result<ProjectiveFit, String>],
-    pub to_local: Matrix3<f64>,
+    pub to_local: Normalization,
 }
 
 impl OwnFits<'_> {
@@ -596,19 +589,13 @@ impl OwnFits<'_> {
                 if !(f.rms_px <= OWN_FIT_RATIO * median) {
                     return None;
                 }
-                let a = &self.to_local;
                 let cameras = f
                     .model
                     .cameras
                     .iter()
                     .map(|p| {
-                        let mut q = [0.0; 12];
-                        for r in 0..3 {
-                            for c in 0..4 {
-                                q[4 * r + c] = (0..3).map(|k| a[(r, k)] * p[4 * k + c]).sum();
-                            }
-                        }
-                        q
+                        let q = self.to_local.camera_to_normalized(p);
+                        std::array::from_fn(|k| q[k])
                     })
                     .collect();
                 Some(ProjectiveModel {
@@ -784,7 +771,11 @@ mod tests {
         }
         // The given fits, mapped into other image units, reproject the windows' measurements
         // mapped likewise; the failed and the far-off ones are not used.
-        let to_local = Matrix3::new(2.5, 0.0, 0.3, 0.0, 2.5, -0.7, 0.0, 0.0, 1.0);
+        let to_local = Normalization {
+            centre: [-0.12, 0.28],
+            scale: 2.5,
+        };
+        let t = Matrix3::new(2.5, 0.0, 0.3, 0.0, 2.5, -0.7, 0.0, 0.0, 1.0);
         let used = OwnFits {
             fits: &own,
             to_local,
@@ -800,7 +791,7 @@ mod tests {
             for (i, _) in meas.visible.iter().enumerate().filter(|v| *v.1) {
                 let (f, k) = (i / tracks.len(), i % tracks.len());
                 let y = projective::project(&m.cameras[f], &m.points[k]);
-                let w = to_local * Vector3::new(meas.w[(2 * f, k)], meas.w[(2 * f + 1, k)], 1.0);
+                let w = t * Vector3::new(meas.w[(2 * f, k)], meas.w[(2 * f + 1, k)], 1.0);
                 assert!((y[0] - w[0]).hypot(y[1] - w[1]) < 1e-6, "{y:?} vs {w:?}");
             }
         }
