@@ -117,7 +117,7 @@ pub fn upgrade(
     }
     let f = m_hat.nrows() / 2;
     // Every model needs 3 frames: two orthographic views leave a one-parameter family of
-    // structures (module documentation), two scaled orthographic ones more.
+    // structures (module documentation); two scaled orthographic views leave more.
     let needed = 3;
     if f < needed {
         return Err(Error::TooFew {

@@ -1418,8 +1418,9 @@ fn robust_stage(
         r => r?,
     };
     let mut other_object_tracks = 0;
-    // No hypothesis at all is no verdict on the tracks (the projective model judges them
-    // below, as without a rigid majority).
+    // No hypothesis at all is no verdict on the tracks: an affine camera fits them all; a
+    // projective one goes on below, where its own model judges them (as without a rigid
+    // majority).
     if let robust::Verdict::NoRigidMajority {
         reason: robust::NoMajorityReason::NoHypothesis,
         ..
