@@ -567,8 +567,8 @@ pub(crate) struct OwnFits<'a> {
 
 impl OwnFits<'_> {
     /// Each window's projective model in the local units, or `None` where its fit failed
-    /// or ended above [`OWN_FIT_RATIO`] times the (lower) median window's RMS (the window is then
-    /// fitted again from its affine completion).
+    /// or ended above [`OWN_FIT_RATIO`] times the (lower) median window's RMS (the window
+    /// is then fitted again from its affine completion).
     fn usable(&self) -> Vec<Option<ProjectiveModel>> {
         let mut rms: Vec<f64> = self
             .fits
