@@ -13,8 +13,9 @@
 //! chain instead, [`rank3::perspective::fit_observations`], and scores its focal length and
 //! structure against the truth, the focal length self-calibrated unless `--focal` gives
 //! it; with `--from-truth` (and `--one`) the same metric adjustment is also run started at
-//! the true cameras, focal length and points — the accuracy floor — and scored alike). The growth exponents are the log–log slopes of time and memory against the number
-//! of observations between the smallest and the largest size.
+//! the true cameras, focal length and points — the accuracy floor — and scored alike). The
+//! growth exponents are the log–log slopes of time and memory against the number of
+//! observations between the smallest and the largest size.
 
 use std::process::Command;
 use std::time::Instant;

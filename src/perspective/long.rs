@@ -223,12 +223,14 @@ fn chain_windows(
             fit: Err("not fitted".into()),
         })
         .collect();
-    // The caller's projective fits of the same windows, in this graph's units; a missing
-    // one, or one far above the others (a local minimum), is fitted again.
-    let own_models: Vec<Option<ProjectiveModel>> = match own {
-        Some(o) if o.fits.len() == list.len() => o.usable(),
-        _ => vec![None; list.len()],
+    // The caller's projective fits of the same windows, mapped into this graph's units when
+    // a window is fitted; a missing one, or one far above the others (a local minimum), is
+    // fitted again.
+    let reuse = match own {
+        Some(o) if o.fits.len() == list.len() => o.reusable(),
+        _ => vec![false; list.len()],
     };
+    let own_model = |i: usize| own.filter(|_| reuse[i]).and_then(|o| o.mapped(i));
     // Window settings in the graph's normalised units: principal point 0, scale 1.
     let window_cfg = |focal: Option<f64>| PerspectiveConfig {
         intrinsics: Intrinsics {
@@ -258,12 +260,17 @@ fn chain_windows(
     let fit_free = |list: &mut [Window], which: &(dyn Fn(usize) -> bool + Sync)| {
         let fits: Vec<_> = list
             .par_iter()
-            .zip(&own_models)
             .enumerate()
-            .map(|(i, (w, own))| {
+            .map(|(i, w)| {
                 if which(i) {
-                    fit_window(w, own.as_ref(), windows, projective_cfg, &first_cfg)
-                        .map_err(|e| e.to_string())
+                    fit_window(
+                        w,
+                        own_model(i).as_ref(),
+                        windows,
+                        projective_cfg,
+                        &first_cfg,
+                    )
+                    .map_err(|e| e.to_string())
                 } else {
                     Err("not fitted".into())
                 }
@@ -299,19 +306,21 @@ fn chain_windows(
             let median = f[f.len() / 2];
             // Every window again with the sequence's focal length.
             let fixed = window_cfg(Some(median));
-            let refits: Vec<_> =
-                list.par_iter()
-                    .zip(&own_models)
-                    .map(|(w, own)| {
-                        let own = own.as_ref();
-                        match &w.fit {
-                            Ok(m) => super::adjust(&w.meas, m, &fixed, 0, &mut NoopObserver)
-                                .map(|r| r.model),
-                            Err(_) => fit_window(w, own, windows, projective_cfg, &fixed),
+            let refits: Vec<_> = list
+                .par_iter()
+                .enumerate()
+                .map(|(i, w)| {
+                    match &w.fit {
+                        Ok(m) => {
+                            super::adjust(&w.meas, m, &fixed, 0, &mut NoopObserver).map(|r| r.model)
                         }
-                        .map_err(|e| e.to_string())
-                    })
-                    .collect();
+                        Err(_) => {
+                            fit_window(w, own_model(i).as_ref(), windows, projective_cfg, &fixed)
+                        }
+                    }
+                    .map_err(|e| e.to_string())
+                })
+                .collect();
             for (w, f) in list.iter_mut().zip(refits) {
                 w.fit = f;
             }
@@ -566,10 +575,11 @@ pub(crate) struct OwnFits<'a> {
 }
 
 impl OwnFits<'_> {
-    /// Each window's projective model in the local units, or `None` where its fit failed
-    /// or ended above [`OWN_FIT_RATIO`] times the (lower) median window's RMS (the window
-    /// is then fitted again from its affine completion).
-    fn usable(&self) -> Vec<Option<ProjectiveModel>> {
+    /// Which windows' fits are reused: not where the fit failed or ended above
+    /// [`windowed::FAILED_WINDOW_RATIO`] times the (lower) median window's RMS, the
+    /// projective chain's own rule (the window is then fitted again from its affine
+    /// completion).
+    fn reusable(&self) -> Vec<bool> {
         let mut rms: Vec<f64> = self
             .fits
             .iter()
@@ -585,31 +595,31 @@ impl OwnFits<'_> {
         self.fits
             .iter()
             .map(|f| {
-                let f = f.as_ref().ok()?;
-                if !(f.rms_px <= OWN_FIT_RATIO * median) {
-                    return None;
-                }
-                let cameras = f
-                    .model
-                    .cameras
-                    .iter()
-                    .map(|p| {
-                        let q = self.to_local.camera_to_normalized(p);
-                        std::array::from_fn(|k| q[k])
-                    })
-                    .collect();
-                Some(ProjectiveModel {
-                    cameras,
-                    points: f.model.points.clone(),
-                })
+                f.as_ref()
+                    .is_ok_and(|f| f.rms_px <= windowed::FAILED_WINDOW_RATIO * median)
             })
             .collect()
     }
-}
 
-/// A caller's projective window fit above this many times the median window's RMS is not
-/// reused ([`OwnFits::usable`]); as the projective chain's failed-window rule.
-const OWN_FIT_RATIO: f64 = 3.0;
+    /// Window `i`'s projective model in the local units (`None` where its fit failed). A
+    /// copy, made only when the window is fitted.
+    fn mapped(&self, i: usize) -> Option<ProjectiveModel> {
+        let f = self.fits[i].as_ref().ok()?;
+        let cameras = f
+            .model
+            .cameras
+            .iter()
+            .map(|p| {
+                let q = self.to_local.camera_to_normalized(p);
+                std::array::from_fn(|k| q[k])
+            })
+            .collect();
+        Some(ProjectiveModel {
+            cameras,
+            points: f.model.points.clone(),
+        })
+    }
+}
 
 type Chained = (
     Vec<Matrix3<f64>>,
@@ -776,18 +786,21 @@ mod tests {
             scale: 2.5,
         };
         let t = Matrix3::new(2.5, 0.0, 0.3, 0.0, 2.5, -0.7, 0.0, 0.0, 1.0);
-        let used = OwnFits {
+        let given = OwnFits {
             fits: &own,
             to_local,
-        }
-        .usable();
-        assert!(used[1].is_none() && used[used.len() - 1].is_none());
-        for ((_, _, tracks, meas), m) in windowed::collect_windows(&g, &wcfg)
+        };
+        let reuse = given.reusable();
+        assert_eq!(reuse.iter().filter(|&&r| r).count(), own.len() - 2);
+        assert!(!reuse[1] && !reuse[own.len() - 1]);
+        for (k, (_, _, tracks, meas)) in windowed::collect_windows(&g, &wcfg)
             .unwrap()
             .iter()
-            .zip(&used)
+            .enumerate()
         {
-            let Some(m) = m else { continue };
+            let Some(m) = given.mapped(k).filter(|_| reuse[k]) else {
+                continue;
+            };
             for (i, _) in meas.visible.iter().enumerate().filter(|v| *v.1) {
                 let (f, k) = (i / tracks.len(), i % tracks.len());
                 let y = projective::project(&m.cameras[f], &m.points[k]);

@@ -872,7 +872,7 @@ fn window_cost(
 /// before it is extended from the chain ([`extend_chain`]). A fit at the noise level is
 /// within a few percent of the median; a local minimum of the window's affine completion
 /// measured 13× (a 20 000-frame corridor, frames 740..780).
-const FAILED_WINDOW_RATIO: f64 = 3.0;
+pub(crate) const FAILED_WINDOW_RATIO: f64 = 3.0;
 
 /// The least noise level (graph units, about 2·10⁻⁴ px) the failed-window test and the
 /// extension's trimming assume: noise-free windows end at RMS 10⁻¹²–10⁻¹⁰, and a ratio of
