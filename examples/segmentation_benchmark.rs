@@ -10,8 +10,10 @@
 //! Environment: `RANK3_DATASETS` (data-set directory), `HIDE` (fractions hidden, default
 //! `0.2,0.5`), `WALKS` (random-walk tracks added as a fraction of the tracks, default 0.1),
 //! `SEED` (default 1), `SPECTRAL=0` (the energy alone, without the spectral partition at
-//! the count), `LABEL_COST`, `HYPOTHESES`, `NEIGHBOURS`, `GROW`, `SMOOTH`, `EIGENGAP` (the
-//! `SegmentConfig` fields of those names; `EIGENGAP=0` counts by the label cost alone).
+//! the count), `LABEL_COST`, `HYPOTHESES`, `NEIGHBOURS`, `GROW`, `SMOOTH`, `EIGENGAP`,
+//! `SPLIT` (the `SegmentConfig` fields of those names, `SPLIT` = `split_separation`;
+//! `EIGENGAP=0 SPLIT=0` counts by the label cost alone). Each file's row ends with the rule
+//! that set the count found and the groups' separation (docs/math.md §11).
 
 use std::time::Instant;
 
@@ -54,6 +56,7 @@ fn run(h: &Hopkins, objects: Objects, seed: u64) -> (rank3::segment::Segmentatio
         smoothness: env_or("SMOOTH", SegmentConfig::default().smoothness),
         spectral: env_or("SPECTRAL", 1u8) == 1,
         eigengap: env_or("EIGENGAP", SegmentConfig::default().eigengap),
+        split_separation: env_or("SPLIT", SegmentConfig::default().split_separation),
         ..Default::default()
     };
     let t = Instant::now();
@@ -231,8 +234,9 @@ fn main() {
             single_seconds,
             objects_seconds,
         };
+        let separation = auto.separation.map_or("-".into(), |q| format!("{q:.1}"));
         println!(
-            "{:<16} {:>3} {:>5} {:>4} | {:>7.2}% {:>6} {:>5} | {:>7.2}% | {:>7.2} {:>8.2} {:>9.2}   σ {:.3}",
+            "{:<16} {:>3} {:>5} {:>4} | {:>7.2}% {:>6} {:>5} | {:>7.2}% | {:>7.2} {:>8.2} {:>9.2}   σ {:.3}  {:?} {}",
             row.name,
             h.measurements.n_frames(),
             h.measurements.n_points(),
@@ -244,7 +248,9 @@ fn main() {
             row.seconds,
             row.single_seconds,
             row.objects_seconds,
-            auto.sigma
+            auto.sigma,
+            auto.count_rule,
+            separation
         );
         rows.push(row);
     }

@@ -49,6 +49,12 @@ pub struct MultiBodyReport {
     pub objects_mode: &'static str,
     /// Number of groups found.
     pub n_objects: usize,
+    /// Which rule set that number: `"given"`, `"label_cost"`, `"eigengap"` or
+    /// `"separation"` (docs/math.md §11).
+    pub count_rule: crate::segment::CountRule,
+    /// The least separated pair of groups' median ratio of a track's RMS under the other
+    /// group's subspace to that under its own; `null` with one group.
+    pub separation: Option<f64>,
     /// Tracks explained by no group.
     pub n_outlier_tracks: usize,
     /// Tracks seen in too few frames to be scored.
@@ -92,6 +98,8 @@ impl MultiBody {
         MultiBodyReport {
             objects_mode: if given { "given" } else { "auto" },
             n_objects: self.objects.len(),
+            count_rule: s.count_rule,
+            separation: s.separation,
             n_outlier_tracks: s.n_outliers(),
             n_unscored_tracks: s.n_unscored(),
             sigma_px: s.sigma,

@@ -660,6 +660,11 @@ fn objects_are_segmented_and_reconstructed_each() {
             .unwrap();
     assert_eq!(report["n_objects"], 2);
     assert_eq!(report["n_outlier_tracks"], walks);
+    // Two clearly separate bodies: the label cost counts them, and the report says so and
+    // how far apart they are.
+    assert_eq!(report["count_rule"], "label_cost");
+    let q = report["separation"].as_f64().unwrap();
+    assert!(q > 10.0, "separation {q}");
     for k in 0..2 {
         let rec: serde_json::Value = serde_json::from_str(
             &std::fs::read_to_string(out.join(format!("object_{k}/reconstruction.json"))).unwrap(),

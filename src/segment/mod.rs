@@ -60,7 +60,12 @@
 //!    subspace refitted, then refined locally (reassign to the nearest subspace, refit:
 //!    k-subspaces) while `E` falls. Spectral clustering separates partly dependent motions
 //!    that the energy's own minimum merges (measured in `spectral` and docs/math.md §11);
-//!    the energy keeps choosing the count and the outliers. With
+//!    the energy keeps choosing the count and the outliers, with two corrections when the
+//!    count is found: raised to the affinity's decisive eigengap
+//!    ([`SegmentConfig::eigengap`]), and from one group to two when the two-group
+//!    partition's groups are separated — the median over their tracks of
+//!    `r_other / r_own`, a track's RMS under the other group's subspace over that under
+//!    its own, at least [`SegmentConfig::split_separation`]. With
 //!    [`SegmentConfig::spectral`] off (or when no spectral partition of the count has every
 //!    group), a given count is reached from the automatic solution by the cheapest merges
 //!    (or additions) and refined with the count fixed.
@@ -101,10 +106,26 @@ mod tests;
 pub enum Objects {
     /// Chosen from the data (at most [`SegmentConfig::max_objects`]): the label cost's
     /// count, raised to the preference affinity's when that one's eigengap is decisive
-    /// ([`SegmentConfig::eigengap`]).
+    /// ([`SegmentConfig::eigengap`]), and from one to two when the two-group partition is
+    /// separated ([`SegmentConfig::split_separation`]).
     Auto,
     /// Exactly this many groups (plus outliers).
     Count(usize),
+}
+
+/// Which rule set the number of groups ([`Segmentation::count_rule`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CountRule {
+    /// The count was given ([`Objects::Count`]).
+    Given,
+    /// The label cost's minimum (the energy `E`).
+    LabelCost,
+    /// Raised to the preference affinity's decisive eigengap ([`SegmentConfig::eigengap`]).
+    Eigengap,
+    /// One group by the label cost, two by the separation of the two-group partition
+    /// ([`SegmentConfig::split_separation`]).
+    Separation,
 }
 
 /// Settings of [`segment`]. Every field has a documented default.
@@ -141,9 +162,19 @@ pub struct SegmentConfig {
     /// motions, which the affinity separates (docs/math.md §11). 0 or above 1 disables
     /// it. Default 0.5 (measured: docs/results.md).
     pub eigengap: f64,
+    /// With `objects = Auto` and `spectral`: when the count found (after the eigengap) is
+    /// one, the two-group spectral partition is kept if its groups are *separated* — the
+    /// median over their tracks of `r_other / r_own` (a track's RMS under the other
+    /// group's subspace over its RMS under its own, [`Segmentation::separation`]) is at
+    /// least this. The label cost's penalty, `∝ F ln n` per group, outweighs the residual
+    /// gain of a few dozen tracks on two partly dependent motions; separation is evidence
+    /// of another kind: a rigid body split in two is explained by either half's subspace
+    /// almost as well (ratios 2–8 measured on single rigid scenes, 12–500 on two-motion
+    /// files; docs/results.md). 0 disables it. Default 10.
+    pub split_separation: f64,
     /// ALS sweeps per refit. Default 15.
     pub refit_sweeps: usize,
-    /// Multiplier of the BIC label cost `β_g` (1 = BIC). Default 1.
+    /// Multiplier of the BIC label cost `β_g` (1 = BIC). Default 8.
     pub label_cost_scale: f64,
     /// Largest noise `σ_g` a group may have, px: a subspace that explains its tracks only
     /// this loosely is not a rigid object (a set of random walks can be fitted that way)
@@ -176,6 +207,7 @@ impl Default for SegmentConfig {
             rounds: 12,
             spectral: true,
             eigengap: 0.5,
+            split_separation: 10.0,
             refit_sweeps: 15,
             label_cost_scale: 8.0,
             max_group_sigma: 2.0,
@@ -218,6 +250,12 @@ impl SegmentConfig {
             return bad(
                 "label_cost_scale",
                 format!("{} is not ≥ 0", self.label_cost_scale),
+            );
+        }
+        if !(self.split_separation >= 0.0 && self.split_separation.is_finite()) {
+            return bad(
+                "split_separation",
+                format!("{} is not ≥ 0", self.split_separation),
             );
         }
         if !(self.max_group_sigma > 0.0) {
@@ -280,6 +318,14 @@ pub struct Segmentation {
     pub sigma: f64,
     /// Final energy `E` (χ² units).
     pub energy: f64,
+    /// Which rule set the number of groups.
+    pub count_rule: CountRule,
+    /// How well the least separated pair of groups is told apart: the median over the
+    /// two groups' tracks of `r_other / r_own`, a track's per-coordinate RMS under the
+    /// other group's subspace over that under its own, over the tracks both subspaces
+    /// score. `None` with fewer than two groups, or when a pair has fewer than 4 such
+    /// tracks on either side.
+    pub separation: Option<f64>,
     /// Label cost of a subspace defined on every frame (χ² units; 0 with a given count).
     pub label_cost: f64,
     /// Hypotheses in the pool at the end (sampled plus refits).
@@ -653,6 +699,11 @@ fn segment_tracks<R: Rng + ?Sized>(
         Objects::Count(k) => k,
         Objects::Auto => best.chosen.len(),
     };
+    let mut count_rule = if given {
+        CountRule::Given
+    } else {
+        CountRule::LabelCost
+    };
     let mut spectral_result: Option<DescentResult> = None;
     if cfg.spectral {
         let sigma2 = crate::eval::median(&pool.sigma2[..n_sampled]).max(info.sigma2_floor);
@@ -678,6 +729,36 @@ fn segment_tracks<R: Rng + ?Sized>(
             let r = descend(&mut pool, &ctx, shared0, start, Objects::Count(count), true);
             rounds += r.rounds;
             spectral_result = (r.chosen.len() == count).then_some(r);
+            if spectral_result.is_some() && !given && count > best.chosen.len() {
+                count_rule = CountRule::Eigengap;
+            }
+        }
+        // One group found: is the two-group partition separated? (`split_separation`.)
+        if spectral_result.is_none()
+            && !given
+            && count == 1
+            && cfg.split_separation > 0.0
+            && let Some(groups) = spectral_groups(&info, &pool, &eligible, 2, sigma2, cfg, rng)
+                .filter(|g| g.len() == 2)
+        {
+            let start: Vec<usize> = groups
+                .into_iter()
+                .map(|(m, chi, s2)| pool.push(m, chi, s2))
+                .collect();
+            let r = descend(&mut pool, &ctx, shared0, start, Objects::Count(2), true);
+            rounds += r.rounds;
+            if r.chosen.len() == 2 {
+                let costs = Costs::new(&pool, r.shared, &info.k, &outlier, &scored, lambda, true);
+                let (_, who) = costs.assign(&r.chosen);
+                let members: Vec<Vec<usize>> = (0..2)
+                    .map(|i| (0..n).filter(|&p| who[p] == i).collect())
+                    .collect();
+                let sep = least_separation(&members, |i, p| pool.chi[r.chosen[i]][p] as f64);
+                if sep.is_some_and(|q| q >= cfg.split_separation) {
+                    count_rule = CountRule::Separation;
+                    spectral_result = Some(r);
+                }
+            }
         }
     }
     match spectral_result {
@@ -742,6 +823,7 @@ fn segment_tracks<R: Rng + ?Sized>(
             (m, chi, s2)
         })
         .collect();
+    let mut finals_chi: Vec<Vec<Option<f64>>> = Vec::with_capacity(finals.len());
     for (k, ((_, tracks), (model, chi, s2))) in groups.into_iter().zip(finals).enumerate() {
         for &p in &tracks {
             labels[p] = Label::Object(k);
@@ -750,6 +832,7 @@ fn segment_tracks<R: Rng + ?Sized>(
         let dof: f64 = tracks.iter().map(|&p| info.nu[p]).sum();
         ss_all += ss;
         dof_all += dof;
+        finals_chi.push(chi);
         objects.push(ObjectGroup {
             tracks,
             rms: (ss / dof.max(1.0)).sqrt(),
@@ -757,7 +840,11 @@ fn segment_tracks<R: Rng + ?Sized>(
             model,
         });
     }
+    let members: Vec<Vec<usize>> = objects.iter().map(|o| o.tracks.clone()).collect();
+    let separation = least_separation(&members, |i, p| finals_chi[i][p].unwrap_or(f64::INFINITY));
     Ok(Segmentation {
+        count_rule,
+        separation,
         labels,
         objects,
         sigma: (ss_all / dof_all.max(1.0)).sqrt(),
@@ -996,6 +1083,41 @@ fn pool_r2<'a>(info: &'a TrackInfo<'_>, pool: &'a Pool) -> impl Fn(usize, usize)
             f32::INFINITY
         }
     }
+}
+
+/// The separation of the least separated pair of `groups` (track indices): for each pair,
+/// the median over both groups' tracks of `√(ρ(other, p) / ρ(own, p))`, `ρ(g, p)` the
+/// squared residual (or `ν_p r²`) of track `p` under group `g`'s subspace, infinite when
+/// `g` cannot score `p`; the smallest such median. Only tracks that both subspaces score
+/// count (a subspace defined on other frames than a track's says nothing about it), and a
+/// pair with fewer than 4 such tracks in either group has no measured separation: the
+/// result is then `None`, as with fewer than two groups. O(K² N log N).
+fn least_separation(groups: &[Vec<usize>], rho: impl Fn(usize, usize) -> f64) -> Option<f64> {
+    let mut worst: Option<f64> = None;
+    for a in 0..groups.len() {
+        for b in a + 1..groups.len() {
+            let sides: Vec<Vec<f64>> = [(a, b), (b, a)]
+                .iter()
+                .map(|&(own, other)| {
+                    groups[own]
+                        .iter()
+                        .map(|&p| (rho(own, p), rho(other, p)))
+                        .filter(|(o, t)| o.is_finite() && t.is_finite())
+                        .map(|(o, t)| (t / o.max(1e-300)).sqrt())
+                        .collect()
+                })
+                .collect();
+            if sides.iter().any(|q| q.len() < 4) {
+                return None;
+            }
+            let mut q = sides.concat();
+            let mid = q.len() / 2;
+            let (_, m, _) = q.select_nth_unstable_by(mid, f64::total_cmp);
+            let m = *m;
+            worst = Some(worst.map_or(m, |w| w.min(m)));
+        }
+    }
+    worst
 }
 
 /// The count the preference affinity's spectrum names: `K` maximizing the eigengap

@@ -255,7 +255,7 @@ fn bad_configuration_and_too_few_tracks_are_errors() {
 /// them to the two bodies, segmented exactly (measured; seeds 1 and 7 stay at one group).
 #[test]
 fn the_eigengap_raises_an_undercounted_small_scene() {
-    let mut raised = 0;
+    let (mut raised, mut separated, mut both_raised) = (0, 0, 0);
     for seed in 1..=8u64 {
         let (meas, truth) = scene(
             12,
@@ -265,23 +265,46 @@ fn the_eigengap_raises_an_undercounted_small_scene() {
             0.0,
             seed,
         );
-        let run = |eigengap: f64| {
+        let run = |eigengap: f64, split_separation: f64| {
             let cfg = SegmentConfig {
                 eigengap,
+                split_separation,
                 ..SegmentConfig::default()
             };
             segment(&meas, &cfg, &mut StdRng::seed_from_u64(7)).unwrap()
         };
-        let (energy, both) = (run(0.0), run(0.5));
+        let energy = run(0.0, 0.0);
         assert_eq!(energy.objects.len(), 1, "seed {seed}: the label cost alone");
-        assert!(
-            both.objects.len() <= 2,
-            "seed {seed}: never more than the bodies"
-        );
-        if both.objects.len() == 2 {
-            assert!(error_on_objects(&both, &truth) <= 0.02, "seed {seed}");
-            raised += 1;
+        assert_eq!(energy.count_rule, CountRule::LabelCost);
+        for (eigengap, split, count) in [
+            (0.5, 0.0, &mut raised),
+            (0.0, 10.0, &mut separated),
+            (0.5, 10.0, &mut both_raised),
+        ] {
+            let r = run(eigengap, split);
+            assert!(
+                r.objects.len() <= 2,
+                "seed {seed}: never more than the bodies"
+            );
+            if r.objects.len() == 2 {
+                assert!(error_on_objects(&r, &truth) <= 0.02, "seed {seed}");
+                assert!(
+                    r.separation.is_some_and(|q| q > 1.0),
+                    "seed {seed}: {:?}",
+                    r.separation
+                );
+                *count += 1;
+            }
         }
     }
-    assert!(raised >= 6, "raised {raised} of 8");
+    eprintln!("raised: eigengap {raised}, separation {separated}, both {both_raised} of 8");
+    assert!(raised >= 6, "eigengap raised {raised} of 8");
+    // At 1 px of noise over 12 frames the two bodies' median ratio is 4.7–38 (3 of 8 at
+    // ≥ 10, measured); the real sequences' partly dependent motions are the rule's case
+    // (tests/segmentation.rs).
+    assert!(separated >= 3, "separation raised {separated} of 8");
+    assert!(
+        both_raised >= raised.max(separated),
+        "both raised {both_raised} of 8"
+    );
 }
