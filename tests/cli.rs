@@ -698,12 +698,29 @@ fn objects_are_segmented_and_reconstructed_each() {
             .arg(&input)
             .arg("--out")
             .arg(&out)
-            .args(["--objects", "auto", "--camera", "orthographic"]),
+            .args([
+                "--objects",
+                "auto",
+                "--camera",
+                "orthographic",
+                "--assign-all",
+            ]),
     );
     for gone in ["reconstruction.json", "completed.txt", "points.ply"] {
         assert!(!out.join(gone).exists(), "{gone} left from the earlier run");
     }
     assert!(out.join("object_1/reconstruction.json").exists());
+    // --assign-all: the walks are given a group too; the bodies' tracks keep theirs.
+    let assigned = std::fs::read_to_string(out.join("objects.csv")).unwrap();
+    for (line, (t, o)) in assigned.lines().skip(1).zip(&labels) {
+        let (t2, o2) = line.split_once(',').unwrap();
+        assert_eq!(t2.parse::<usize>().unwrap(), *t);
+        let o2: i64 = o2.parse().unwrap();
+        assert!(o2 >= 0, "track {t} is {o2} with --assign-all");
+        if *o >= 0 {
+            assert_eq!(o2, *o, "track {t}");
+        }
+    }
     assert_eq!(
         std::fs::read_to_string(out.join("notes.txt")).unwrap(),
         "mine"

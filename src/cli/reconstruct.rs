@@ -139,6 +139,12 @@ pub struct ReconstructOpts {
     /// OUT/object_<k>/ per object (docs/formats.md).
     #[arg(long, value_name = "auto|K", value_parser = parse_objects)]
     pub objects: Option<rank3::segment::Objects>,
+    /// With --objects: give every track the group that explains it best instead of
+    /// labelling the tracks no group explains as outliers (-1), as benchmarks whose every
+    /// track belongs to a motion expect (Hopkins 155). Tracks seen in too few frames to be
+    /// scored stay -1.
+    #[arg(long, requires = "objects")]
+    pub assign_all: bool,
     /// Do not build the textured mesh (built by default when the frames are known: `run`,
     /// `reconstruct --images`; not with --objects).
     #[arg(long, conflicts_with = "objects")]
@@ -348,6 +354,7 @@ pub fn reconstruct(a: &ReconstructArgs) -> Result<(), rank3::Error> {
             t,
             &config,
             objects,
+            a.opts.assign_all,
             &a.out,
         );
     }
@@ -490,10 +497,12 @@ pub fn reconstruct_objects(
     table: &rank3::TrackTable,
     config: &Config,
     objects: rank3::segment::Objects,
+    assign_all: bool,
     out: &Path,
 ) -> Result<(), rank3::Error> {
     let seg = rank3::segment::SegmentConfig {
         objects,
+        label_outliers: !assign_all,
         image_area: config
             .perspective
             .intrinsics

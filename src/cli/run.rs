@@ -116,6 +116,7 @@ pub fn run(a: &RunArgs) -> Result<(), rank3::Error> {
             &table,
             &config,
             objects,
+            a.recon.assign_all,
             &a.out,
         );
     }

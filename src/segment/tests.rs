@@ -183,6 +183,31 @@ fn noisy_partial_scene_with_translating_object_and_random_walks() {
     assert!(seg.n_outliers() <= 12, "outliers {}", seg.n_outliers());
     // σ close to the noise.
     assert!((seg.sigma - 0.5).abs() < 0.15, "sigma {}", seg.sigma);
+
+    // Every track assigned (`label_outliers = false`): the same groups, the tracks that
+    // were grouped keep their group, and no track is an outlier.
+    let all = segment(
+        &meas,
+        &SegmentConfig {
+            label_outliers: false,
+            ..SegmentConfig::default()
+        },
+        &mut StdRng::seed_from_u64(7),
+    )
+    .unwrap();
+    assert_eq!(all.objects.len(), seg.objects.len());
+    assert_eq!(all.n_outliers(), 0);
+    let mut map = std::collections::HashMap::new();
+    for (a, b) in seg.labels.iter().zip(&all.labels) {
+        match (a, b) {
+            (Label::Object(i), Label::Object(j)) => {
+                assert_eq!(*map.entry(*i).or_insert(*j), *j, "group {i} split");
+            }
+            (Label::Object(_), other) => panic!("a grouped track became {other:?}"),
+            (Label::Unscored, b) => assert_eq!(*b, Label::Unscored),
+            (Label::Outlier, b) => assert!(matches!(b, Label::Object(_))),
+        }
+    }
 }
 
 #[test]
