@@ -184,8 +184,15 @@ pub struct SegmentConfig {
     pub label_cost_scale: f64,
     /// Largest noise `σ_g` a group may have, px: a subspace that explains its tracks only
     /// this loosely is not a rigid object (a set of random walks can be fitted that way)
-    /// and is not kept. Default 2.
+    /// and is not kept — unless the data's own noise is that high: the bound is the
+    /// larger of this and `max_group_sigma_ratio` × the median σ of the local hypotheses.
+    /// Default 2.
     pub max_group_sigma: f64,
+    /// The bound on a group's σ relative to the data's noise level (the median σ of the
+    /// local hypotheses, step 1), so that tracks noisier than `max_group_sigma` can still
+    /// form groups. Default 4 (measured: docs/results.md, synthetic scenes at 2 px of
+    /// noise).
+    pub max_group_sigma_ratio: f64,
     /// One noise level `σ` for all groups (the tracker's), instead of one per group. With
     /// per-group noise a tight subset of a body (a facade seen in perspective) can pay
     /// for its own group by its smaller `σ`. Default true.
@@ -218,6 +225,7 @@ impl Default for SegmentConfig {
             refit_sweeps: 15,
             label_cost_scale: 8.0,
             max_group_sigma: 2.0,
+            max_group_sigma_ratio: 4.0,
             shared_noise: true,
             image_area: None,
             subspace: SubspaceConfig::default(),
@@ -263,6 +271,12 @@ impl SegmentConfig {
             return bad(
                 "split_separation",
                 format!("{} is not ≥ 0", self.split_separation),
+            );
+        }
+        if !(self.max_group_sigma_ratio >= 0.0 && self.max_group_sigma_ratio.is_finite()) {
+            return bad(
+                "max_group_sigma_ratio",
+                format!("{} is not ≥ 0", self.max_group_sigma_ratio),
             );
         }
         if !(self.max_group_sigma > 0.0) {
@@ -617,12 +631,12 @@ fn segment_tracks<R: Rng + ?Sized>(
         .collect();
     let n_obs: usize = (0..n).map(|p| 2 * ts.frames_of(p).len()).sum();
     let area = cfg.image_area.unwrap_or_else(|| bounding_area(ts));
-    let info = TrackInfo {
+    let mut info = TrackInfo {
         ts,
         nu,
         k: (0..n).map(|p| ts.frames_of(p).len() as f64).collect(),
         sigma2_floor: (1e-6 * area.sqrt()).powi(2),
-        sigma2_max: cfg.max_group_sigma.powi(2),
+        sigma2_max: f64::INFINITY,
     };
 
     // 1. Hypotheses from local neighbourhoods, each with its own σ².
@@ -632,14 +646,34 @@ fn segment_tracks<R: Rng + ?Sized>(
         .collect();
     let sweeps = cfg.refit_sweeps;
     let grow = cfg.grow_steps;
+    // The local fits first, uncapped: their median σ is the data's noise level, which
+    // sets the largest σ a group may have (`max_group_sigma`, `max_group_sigma_ratio`).
+    let local: Vec<Option<Fitted>> = samples
+        .par_iter()
+        .map(|set| {
+            ts.fit(&set[..4])
+                .and_then(|m0| info.refit(&m0, set, sweeps))
+        })
+        .collect();
+    let local_s2: Vec<f64> = local.iter().flatten().map(|f| f.2).collect();
+    let noise2 = if local_s2.is_empty() {
+        0.0
+    } else {
+        crate::eval::median(&local_s2)
+    };
+    info.sigma2_max = cfg
+        .max_group_sigma
+        .powi(2)
+        .max(cfg.max_group_sigma_ratio.powi(2) * noise2);
+    let sigma2_max = info.sigma2_max;
     let fitted: Vec<Fitted> = samples
         .par_iter()
-        .flat_map_iter(|set| {
+        .zip(local)
+        .flat_map_iter(|(set, local)| {
             let mut out = Vec::new();
-            let local = ts
-                .fit(&set[..4])
-                .and_then(|m0| info.refit(&m0, set, sweeps));
-            let Some(mut cur) = local else { return out };
+            let Some(mut cur) = local.filter(|f| f.2 <= sigma2_max) else {
+                return out;
+            };
             out.push(cur.clone());
             // Growth: refit to every track within 3σ of the local fit (and the local set).
             for _ in 0..grow {

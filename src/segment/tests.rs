@@ -333,3 +333,48 @@ fn the_eigengap_raises_an_undercounted_small_scene() {
         "both raised {both_raised} of 8"
     );
 }
+
+/// Tracks noisier than `max_group_sigma` (2 px of noise per coordinate): the bound on a
+/// group's σ follows the data's own noise level (`max_group_sigma_ratio`), so the bodies
+/// are still groups; with the fixed 2 px bound alone (ratio 0) no hypothesis survives and
+/// the segmentation failed (`Degenerate`).
+#[test]
+fn noisy_tracks_still_form_groups() {
+    let (meas, truth) = scene(
+        30,
+        &[(150, Motion::General), (90, Motion::General)],
+        0,
+        2.0,
+        0.0,
+        5,
+    );
+    let run = |ratio: f64| {
+        let cfg = SegmentConfig {
+            max_group_sigma_ratio: ratio,
+            ..SegmentConfig::default()
+        };
+        segment(&meas, &cfg, &mut StdRng::seed_from_u64(3))
+    };
+    let seg = run(SegmentConfig::default().max_group_sigma_ratio).unwrap();
+    let sizes: Vec<usize> = seg.objects.iter().map(|o| o.tracks.len()).collect();
+    assert_eq!(
+        seg.objects.len(),
+        2,
+        "groups found: {sizes:?}, σ {}",
+        seg.sigma
+    );
+    let err = error_on_objects(&seg, &truth);
+    assert!(err <= 0.02, "misclassification {err}");
+    assert!((seg.sigma - 2.0).abs() < 0.4, "sigma {}", seg.sigma);
+    // With the fixed bound alone every local hypothesis is above it: no group at all.
+    match run(0.0) {
+        Err(Error::Degenerate(_)) => {}
+        Ok(s) => assert!(
+            s.n_outliers() > meas.n_points() / 2,
+            "with the fixed bound: {} groups, {} outliers",
+            s.objects.len(),
+            s.n_outliers()
+        ),
+        Err(e) => panic!("{e}"),
+    }
+}
