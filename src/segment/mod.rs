@@ -833,7 +833,8 @@ fn segment_tracks<R: Rng + ?Sized>(
     // Final labels and groups, largest first.
     let costs = Costs::new(&pool, shared, &info.k, &outlier, &scored, lambda, given);
     let energy = costs.energy(&chosen);
-    let mut who = costs.smooth(&chosen, &nbrs, cfg.smoothness);
+    let who_fit = costs.smooth(&chosen, &nbrs, cfg.smoothness);
+    let mut who = who_fit.clone();
     if !cfg.label_outliers {
         for p in 0..n {
             if !scored[p] || who[p] != usize::MAX {
@@ -845,13 +846,14 @@ fn segment_tracks<R: Rng + ?Sized>(
                 .unwrap_or(usize::MAX);
         }
     }
-    let mut groups: Vec<(usize, Vec<usize>)> = chosen
+    // (label index, hypothesis, tracks), largest first.
+    let mut groups: Vec<(usize, usize, Vec<usize>)> = chosen
         .iter()
         .enumerate()
-        .map(|(i, &h)| (h, (0..n).filter(|&p| who[p] == i).collect::<Vec<_>>()))
-        .filter(|(_, g)| !g.is_empty())
+        .map(|(i, &h)| (i, h, (0..n).filter(|&p| who[p] == i).collect::<Vec<_>>()))
+        .filter(|(_, _, g)| !g.is_empty())
         .collect();
-    groups.sort_by(|a, b| b.1.len().cmp(&a.1.len()).then(a.1[0].cmp(&b.1[0])));
+    groups.sort_by(|a, b| b.2.len().cmp(&a.2.len()).then(a.2[0].cmp(&b.2[0])));
     let mut labels: Vec<Label> = (0..n)
         .map(|p| {
             if scored[p] {
@@ -863,10 +865,18 @@ fn segment_tracks<R: Rng + ?Sized>(
         .collect();
     let mut objects = Vec::with_capacity(groups.len());
     let (mut ss_all, mut dof_all) = (0.0, 0.0);
-    // Each group's subspace and noise refitted to its final tracks (the labels stay).
+    // Each group's subspace and noise refitted to its final tracks (the labels stay) —
+    // those the outlier model grouped: with `label_outliers` off, the tracks assigned
+    // afterwards are labelled but not fitted.
     let finals: Vec<(AffineSubspace, Vec<Option<f64>>, f64)> = groups
         .par_iter()
-        .map(|(h, tracks)| {
+        .map(|(i, h, labelled)| {
+            let core: Vec<usize> = labelled
+                .iter()
+                .copied()
+                .filter(|&p| who_fit[p] == *i)
+                .collect();
+            let tracks = if core.is_empty() { labelled } else { &core };
             let m = ts
                 .refit_with(&pool.models[*h], tracks, sweeps)
                 .unwrap_or_else(|| pool.models[*h].clone());
@@ -876,7 +886,7 @@ fn segment_tracks<R: Rng + ?Sized>(
         })
         .collect();
     let mut finals_chi: Vec<Vec<Option<f64>>> = Vec::with_capacity(finals.len());
-    for (k, ((_, tracks), (model, chi, s2))) in groups.into_iter().zip(finals).enumerate() {
+    for (k, ((_, _, tracks), (model, chi, s2))) in groups.into_iter().zip(finals).enumerate() {
         for &p in &tracks {
             labels[p] = Label::Object(k);
         }

@@ -208,6 +208,14 @@ fn noisy_partial_scene_with_translating_object_and_random_walks() {
             (Label::Outlier, b) => assert!(matches!(b, Label::Object(_))),
         }
     }
+    // The groups' subspaces are fitted to the tracks the outlier model grouped, not to the
+    // walks assigned afterwards.
+    for (i, j) in map {
+        assert!(
+            seg.objects[i].model.m == all.objects[j].model.m,
+            "group {i}: the subspace moved"
+        );
+    }
 }
 
 #[test]
