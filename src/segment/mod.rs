@@ -69,8 +69,10 @@
 //!    [`SegmentConfig::spectral`] off (or when no spectral partition of the count has every
 //!    group), a given count is reached from the automatic solution by the cheapest merges
 //!    (or additions) and refined with the count fixed.
-//! 5. The final groups' subspaces are refitted to their tracks for the report (the labels
-//!    stay).
+//! 5. The final groups' subspaces are refitted to their tracks for the report; the groups'
+//!    labels stay, and the tracks left as outliers are judged again under the refits (a
+//!    refit covers all frames of its group's tracks, the chosen hypothesis may not have): a
+//!    track joins the group that explains it best when that beats the outlier model.
 //!
 //! Groups with fewer than `min_group_tracks` tracks are never kept. Tracks seen in fewer
 //! than `subspace.min_overlap` frames cannot be scored and are labelled
@@ -381,6 +383,9 @@ impl Segmentation {
 
 /// A fitted hypothesis: the subspace, every track's `ν_p r²_p` under it, its `σ²`.
 type Fitted = (AffineSubspace, Vec<Option<f64>>, f64);
+
+/// A final group: its label index in the chosen set, its hypothesis, its tracks.
+type FinalGroup = (usize, usize, Vec<usize>);
 
 /// A pool of hypotheses with each track's cost `D_p(h)` under each.
 struct Pool {
@@ -846,8 +851,8 @@ fn segment_tracks<R: Rng + ?Sized>(
                 .unwrap_or(usize::MAX);
         }
     }
-    // (label index, hypothesis, tracks), largest first.
-    let mut groups: Vec<(usize, usize, Vec<usize>)> = chosen
+    // Largest first.
+    let mut groups: Vec<FinalGroup> = chosen
         .iter()
         .enumerate()
         .map(|(i, &h)| (i, h, (0..n).filter(|&p| who[p] == i).collect::<Vec<_>>()))
@@ -885,8 +890,48 @@ fn segment_tracks<R: Rng + ?Sized>(
             (m, chi, s2)
         })
         .collect();
-    let mut finals_chi: Vec<Vec<Option<f64>>> = Vec::with_capacity(finals.len());
-    for (k, ((_, _, tracks), (model, chi, s2))) in groups.into_iter().zip(finals).enumerate() {
+    // The tracks left as outliers judged again under the refitted subspaces: a refit
+    // covers the frames of all its group's tracks, where the chosen hypothesis may not
+    // have been defined (a short track there was not scored by it, hence an outlier). A
+    // track joins the group that explains it best when that beats the outlier model, as
+    // in `E`; the groups' subspaces stay those fitted above.
+    let mut joined: Vec<(FinalGroup, Fitted)> = groups.into_iter().zip(finals).collect();
+    if cfg.label_outliers && !joined.is_empty() {
+        let mut grouped = vec![false; n];
+        for ((_, _, tracks), _) in &joined {
+            for &p in tracks {
+                grouped[p] = true;
+            }
+        }
+        let mut add: Vec<Vec<usize>> = vec![Vec::new(); joined.len()];
+        for p in (0..n).filter(|&p| scored[p] && !grouped[p]) {
+            let best = joined
+                .iter()
+                .enumerate()
+                .filter_map(|(g, (_, (_, chi, s2)))| {
+                    let s2 = shared.unwrap_or(*s2);
+                    chi[p].map(|c| (g, c / s2 + 2.0 * info.k[p] * s2.ln()))
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((g, d)) = best
+                && d < outlier[p]
+            {
+                add[g].push(p);
+            }
+        }
+        for (((_, _, tracks), _), extra) in joined.iter_mut().zip(add) {
+            if !extra.is_empty() {
+                tracks.extend(extra);
+                tracks.sort_unstable();
+            }
+        }
+        joined.sort_by(|a, b| {
+            let (x, y) = (&a.0.2, &b.0.2);
+            y.len().cmp(&x.len()).then(x[0].cmp(&y[0]))
+        });
+    }
+    let mut finals_chi: Vec<Vec<Option<f64>>> = Vec::with_capacity(joined.len());
+    for (k, ((_, _, tracks), (model, chi, s2))) in joined.into_iter().enumerate() {
         for &p in &tracks {
             labels[p] = Label::Object(k);
         }
