@@ -263,23 +263,14 @@ impl SegmentConfig {
         if self.min_group_tracks < 4 {
             return bad("min_group_tracks", format!("{} < 4", self.min_group_tracks));
         }
-        if !(self.label_cost_scale >= 0.0 && self.label_cost_scale.is_finite()) {
-            return bad(
-                "label_cost_scale",
-                format!("{} is not ≥ 0", self.label_cost_scale),
-            );
-        }
-        if !(self.split_separation >= 0.0 && self.split_separation.is_finite()) {
-            return bad(
-                "split_separation",
-                format!("{} is not ≥ 0", self.split_separation),
-            );
-        }
-        if !(self.max_group_sigma_ratio >= 0.0 && self.max_group_sigma_ratio.is_finite()) {
-            return bad(
-                "max_group_sigma_ratio",
-                format!("{} is not ≥ 0", self.max_group_sigma_ratio),
-            );
+        for (field, v) in [
+            ("label_cost_scale", self.label_cost_scale),
+            ("split_separation", self.split_separation),
+            ("max_group_sigma_ratio", self.max_group_sigma_ratio),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return bad(field, format!("{v} is not ≥ 0"));
+            }
         }
         if !(self.max_group_sigma > 0.0) {
             return bad(
@@ -670,13 +661,12 @@ fn segment_tracks<R: Rng + ?Sized>(
         .max_group_sigma
         .powi(2)
         .max(cfg.max_group_sigma_ratio.powi(2) * noise2);
-    let sigma2_max = info.sigma2_max;
     let fitted: Vec<Fitted> = samples
         .par_iter()
         .zip(local)
         .flat_map_iter(|(set, local)| {
             let mut out = Vec::new();
-            let Some(mut cur) = local.filter(|f| f.2 <= sigma2_max) else {
+            let Some(mut cur) = local.filter(|f| f.2 <= info.sigma2_max) else {
                 return out;
             };
             out.push(cur.clone());

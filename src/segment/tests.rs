@@ -286,6 +286,34 @@ fn bad_configuration_and_too_few_tracks_are_errors() {
             ..
         })
     ));
+    for (field, cfg) in [
+        (
+            "label_cost_scale",
+            SegmentConfig {
+                label_cost_scale: f64::NAN,
+                ..Default::default()
+            },
+        ),
+        (
+            "split_separation",
+            SegmentConfig {
+                split_separation: -1.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "max_group_sigma_ratio",
+            SegmentConfig {
+                max_group_sigma_ratio: f64::INFINITY,
+                ..Default::default()
+            },
+        ),
+    ] {
+        match cfg.validate() {
+            Err(Error::InvalidConfig { field: f, .. }) => assert_eq!(f, field),
+            r => panic!("{field}: {r:?}"),
+        }
+    }
 }
 
 /// Small scenes where the label cost alone (`eigengap = 0`) under-counts: two bodies of
