@@ -11,7 +11,8 @@
 //! `0.2,0.5`), `WALKS` (random-walk tracks added as a fraction of the tracks, default 0.1),
 //! `SEED` (default 1), `SPECTRAL=0` (the energy alone, without the spectral partition at
 //! the count), `LABEL_COST`, `HYPOTHESES`, `NEIGHBOURS`, `GROW`, `SMOOTH`, `EIGENGAP`,
-//! `SPLIT` (the `SegmentConfig` fields of those names, `SPLIT` = `split_separation`;
+//! `SPLIT`, `MERGE` (the `SegmentConfig` fields of those names, `SPLIT` = `split_separation`,
+//! `MERGE` = `merge_ratio`;
 //! `EIGENGAP=0 SPLIT=0` counts by the label cost alone). Each file's row ends with the rule
 //! that set the count found, the groups' separation (docs/math.md §11) and the errors with
 //! every track assigned to a group (`label_outliers = false`, `--assign-all`: the published
@@ -72,6 +73,7 @@ fn run_labelled(
         spectral: env_or("SPECTRAL", 1u8) == 1,
         eigengap: env_or("EIGENGAP", SegmentConfig::default().eigengap),
         split_separation: env_or("SPLIT", SegmentConfig::default().split_separation),
+        merge_ratio: env_or("MERGE", SegmentConfig::default().merge_ratio),
         ..Default::default()
     };
     let t = Instant::now();
@@ -274,6 +276,20 @@ fn main() {
             100.0 * row.error_auto_all,
             100.0 * row.error_k_all,
         );
+        for t in &auto.merge_tests {
+            println!(
+                "    merge test {} + {} tracks: separation {} ratios {} gain {} perspective RMS {} → {}",
+                t.tracks[0],
+                t.tracks[1],
+                t.separation.map_or("-".into(), |q| format!("{q:.1}")),
+                t.ratios
+                    .map_or("-".into(), |r| format!("{:.2} / {:.2}", r[0], r[1])),
+                t.perspective_gain.map_or("-".into(), |g| format!("{g:.2}")),
+                t.perspective_rms
+                    .map_or("-".into(), |r| format!("{r:.3} px")),
+                if t.merged { "merged" } else { "kept apart" }
+            );
+        }
         rows.push(row);
     }
     for g in [2, 3] {

@@ -25,8 +25,11 @@ pub struct ObjectResult {
     pub index: usize,
     /// Input column indices of its tracks.
     pub tracks: Vec<usize>,
-    /// Per-coordinate RMS of its tracks' fits to its affine subspace, px.
+    /// Per-coordinate RMS of its tracks' fits to its affine subspace, px (for a group of
+    /// several pieces, under the perspective fit that merged them).
     pub subspace_rms_px: f64,
+    /// Groups of the affine segmentation it holds ([`crate::segment::ObjectGroup::pieces`]).
+    pub pieces: usize,
     /// Its reconstruction, or why it failed (the other objects are still reconstructed).
     pub reconstruction: std::result::Result<Reconstruction, String>,
 }
@@ -49,12 +52,15 @@ pub struct MultiBodyReport {
     pub objects_mode: &'static str,
     /// Number of groups found.
     pub n_objects: usize,
-    /// Which rule set that number: `"given"`, `"label_cost"`, `"eigengap"` or
-    /// `"separation"` (docs/math.md §11).
+    /// Which rule set that number: `"given"`, `"label_cost"`, `"eigengap"`,
+    /// `"separation"` or `"perspective_merge"` (docs/math.md §11).
     pub count_rule: crate::segment::CountRule,
     /// The least separated pair of groups' median ratio of a track's RMS under the other
     /// group's subspace to that under its own; `null` with one group.
     pub separation: Option<f64>,
+    /// The perspective-aware merge tests (pieces of one body seen in perspective joined;
+    /// [`crate::segment::SegmentConfig::merge_ratio`]).
+    pub merge_tests: Vec<crate::segment::MergeTest>,
     /// Tracks explained by no group.
     pub n_outlier_tracks: usize,
     /// Tracks seen in too few frames to be scored.
@@ -80,7 +86,12 @@ pub struct MultiBodyReport {
 pub struct ObjectReport {
     pub index: usize,
     pub n_tracks: usize,
+    /// Per-coordinate RMS of its tracks under its segmentation model, px (the affine
+    /// subspace; for a group merged from `pieces` > 1, the perspective fit that merged it).
     pub subspace_rms_px: f64,
+    /// Groups of the affine segmentation it holds (more than 1: merged by the
+    /// perspective-aware test).
+    pub pieces: usize,
     /// Sub-folder holding its reconstruction (`object_<index>`), when it succeeded.
     pub dir: Option<String>,
     /// Reprojection RMS of its reconstruction, px.
@@ -100,6 +111,7 @@ impl MultiBody {
             n_objects: self.objects.len(),
             count_rule: s.count_rule,
             separation: s.separation,
+            merge_tests: s.merge_tests.clone(),
             n_outlier_tracks: s.n_outliers(),
             n_unscored_tracks: s.n_unscored(),
             sigma_px: s.sigma,
@@ -116,6 +128,7 @@ impl MultiBody {
                     index: o.index,
                     n_tracks: o.tracks.len(),
                     subspace_rms_px: o.subspace_rms_px,
+                    pieces: o.pieces,
                     dir: o.reconstruction.as_ref().ok().map(|_| object_dir(o.index)),
                     rms_px: o.reconstruction.as_ref().ok().map(|r| r.rms_px),
                     camera: o.reconstruction.as_ref().ok().map(|r| r.camera_model),
@@ -162,6 +175,7 @@ pub fn reconstruct_objects(
                 index: k,
                 tracks: g.tracks.clone(),
                 subspace_rms_px: g.rms,
+                pieces: g.pieces,
                 reconstruction: Reconstruction::from_tracks(&sub, config)
                     .map_err(|e| e.to_string()),
             }

@@ -329,3 +329,94 @@ fn second_object_rejected(
         "{flagged_other} entries flagged on the car's kept tracks"
     );
 }
+
+/// Strong perspective (distance 4 object radii, focal 800 px): the affine subspaces cut one
+/// rigid body into pieces, and the perspective-aware merge test (`merge_ratio`) joins them,
+/// while two independently moving bodies in the same setting stay apart. The Model House
+/// (10 frames, real, strong perspective) likewise becomes one group.
+#[test]
+fn pieces_of_a_body_seen_in_perspective_are_merged() {
+    use rand::SeedableRng;
+    use rank3::segment::{CountRule, segment};
+    let scene = |objects: Vec<SynthObject>| {
+        generate(&SynthConfig {
+            camera: CameraModel::Perspective,
+            distance: 4.0,
+            focal: Some(800.0),
+            frames: 20,
+            points: 200,
+            noise: 0.5,
+            outliers: 0.05,
+            outlier_kind: OutlierKind::RandomWalk,
+            objects,
+            seed: 1,
+            ..Default::default()
+        })
+        .unwrap()
+    };
+    let run = |meas: &rank3::Measurements, merge_ratio: f64| {
+        let cfg = SegmentConfig {
+            merge_ratio,
+            ..Default::default()
+        };
+        segment(meas, &cfg, &mut rand::rngs::StdRng::seed_from_u64(1)).unwrap()
+    };
+    // One body: pieces without the test, one group with it; every walk an outlier and
+    // every track of the body in the group.
+    let one = scene(Vec::new());
+    let meas = one.table.measurements();
+    let off = run(&meas, 0.0);
+    assert!(
+        off.objects.len() >= 2,
+        "without the test: {} groups",
+        off.objects.len()
+    );
+    let on = run(&meas, SegmentConfig::default().merge_ratio);
+    assert_eq!(on.objects.len(), 1, "tests {:?}", on.merge_tests);
+    assert_eq!(on.count_rule, CountRule::PerspectiveMerge);
+    assert_eq!(on.objects[0].pieces, off.objects.len());
+    let merged = on.merge_tests.iter().find(|t| t.merged).unwrap();
+    let r = merged.ratios.unwrap();
+    assert!(r[0] < 1.0 && r[1] < 1.0, "ratios {r:?}");
+    for (p, w) in one.outlier_tracks.iter().enumerate() {
+        let expected = if w.is_some() {
+            Label::Outlier
+        } else {
+            Label::Object(0)
+        };
+        assert_eq!(on.labels[p], expected, "track {p}");
+    }
+    // Two bodies: two groups, as the truth has them (a few tracks labelled outlier: 3 of
+    // 190 measured).
+    let two = scene(vec![SynthObject {
+        share: 0.25,
+        motion: ObjectMotion::Rotating,
+    }]);
+    let s = run(
+        &two.table.measurements(),
+        SegmentConfig::default().merge_ratio,
+    );
+    let idx: Vec<usize> = (0..two.objects.len())
+        .filter(|&p| two.outlier_tracks[p].is_none())
+        .collect();
+    let truth: Vec<usize> = idx.iter().map(|&p| two.objects[p]).collect();
+    let codes: Vec<i64> = idx.iter().map(|&p| s.labels[p].code()).collect();
+    assert_eq!(s.objects.len(), 2, "tests {:?}", s.merge_tests);
+    let err = misclassification(&codes, &truth);
+    assert!(err <= 0.03, "misclassification {err}");
+
+    let Some(house) = rank3::datasets::find("model_house/matrix/M_dense.txt") else {
+        return;
+    };
+    let meas = rank3::table::read_tracks(&house)
+        .unwrap()
+        .table
+        .measurements();
+    let s = run(&meas, SegmentConfig::default().merge_ratio);
+    assert_eq!(
+        s.objects.len(),
+        1,
+        "the Model House: tests {:?}",
+        s.merge_tests
+    );
+}

@@ -73,6 +73,15 @@
 //!    labels stay, and the tracks left as outliers are judged again under the refits (a
 //!    refit covers all frames of its group's tracks, the chosen hypothesis may not have): a
 //!    track joins the group that explains it best when that beats the outlier model.
+//! 6. **Pieces of one body seen in perspective merged** (count found; `merge_ratio`): a
+//!    pair of groups that one metric perspective camera per frame explains together —
+//!    each side's median of `r_P / r_own`, a track's RMS under the perspective model
+//!    fitted to the union over its RMS under its own group's model, at most
+//!    [`SegmentConfig::merge_ratio`] — where perspective explains what one affine
+//!    subspace of the union does not (the median of `r_A / r_P` at least
+//!    [`SegmentConfig::merge_gain`]) is one body that the affine subspaces cut. Pairs
+//!    whose affine separation exceeds [`SegmentConfig::merge_max_separation`] are not
+//!    fitted. See `perspective`.
 //!
 //! Groups with fewer than `min_group_tracks` tracks are never kept. Tracks seen in fewer
 //! than `subspace.min_overlap` frames cannot be scored and are labelled
@@ -86,7 +95,9 @@
 //! O(H · (1 + grow_steps) · n_obs) time and a residual table of O(H · N) memory (f32);
 //! each round O(K · H · N) for the label search plus O(K · n_obs) per ALS sweep of the
 //! refits and O(K² · n_obs) for the merge tests; the spectral step O(n²·H + n³) on
-//! `n ≤ 1500` tracks. Nothing is dense in F×N beyond what
+//! `n ≤ 1500` tracks; step 6 one perspective fit per pair tested (at most `K(K−1)/2`, then
+//! `K` per merge), each linear in the pair's observations per adjustment iteration.
+//! Nothing is dense in F×N beyond what
 //! [`TrackSubspace`] itself holds. The O(N²) neighbour pre-selection dominates beyond
 //! ~10⁴ tracks (see the long-video issue for a spatial index).
 
@@ -98,7 +109,9 @@ use rayon::prelude::*;
 use crate::robust::ransac::Estimator;
 use crate::robust::subspace::{AffineSubspace, SubspaceConfig, TrackSubspace};
 use crate::{Error, Measurements, Result};
+pub use perspective::MergeTest;
 
+mod perspective;
 mod spectral;
 #[cfg(test)]
 mod tests;
@@ -128,6 +141,9 @@ pub enum CountRule {
     /// One group by the label cost, two by the separation of the two-group partition
     /// ([`SegmentConfig::split_separation`]).
     Separation,
+    /// One of the rules above, then lowered by the perspective-aware merge test
+    /// ([`SegmentConfig::merge_ratio`]): pieces of one body seen in perspective merged.
+    PerspectiveMerge,
 }
 
 /// Settings of [`segment`]. Every field has a documented default.
@@ -174,6 +190,29 @@ pub struct SegmentConfig {
     /// almost as well (ratios 2–8 measured on single rigid scenes, 12–500 on two-motion
     /// files; docs/results.md). 0 disables it. Default 10.
     pub split_separation: f64,
+    /// With `objects = Auto`: two groups are merged when one metric perspective camera
+    /// per frame explains both — on each side, the median over its tracks of
+    /// `r_P / r_own` (a track's RMS under the perspective model fitted to the union, over
+    /// its RMS under its own group's model) is at most this — and perspective explains
+    /// what one affine subspace does not (`merge_gain`). Step 6 of the module
+    /// documentation; `perspective`. Affine subspaces cut a rigid body seen at close range
+    /// into pieces; one set of perspective cameras fits the pieces together, not two
+    /// independent motions (pieces measured 0.27–1.06, separate motions 1.78 and above;
+    /// docs/results.md). 0 disables the test. Default 1.3.
+    pub merge_ratio: f64,
+    /// Pairs of groups whose affine separation ([`Segmentation::separation`]'s measure) is
+    /// above this are not given the merge test: their subspaces explain each other's tracks
+    /// as badly as separate motions' do (a rigid body cut in two measures 2.4–7.5, separate
+    /// motions 12–500; docs/results.md), and each test is a perspective fit. Default 30.
+    pub merge_max_separation: f64,
+    /// The merge test also requires that perspective explain what the affine camera does
+    /// not: the median over the union's tracks of `r_A / r_P` (a track's RMS under one
+    /// affine subspace refitted to the union, over its RMS under the perspective fit) at
+    /// least this. Without it, a pair of partly dependent motions that one affine subspace
+    /// almost fits (a body that only translates beside a turning one) merges too: one set of
+    /// cameras explains both about as well either way (measured 1.09–1.49; pieces of one
+    /// body 1.88–6.5; docs/results.md). Default 1.6.
+    pub merge_gain: f64,
     /// Whether tracks no group explains better than chance are labelled
     /// [`Label::Outlier`] (default true). False: every scored track is given the group
     /// that explains it best — the protocol of benchmarks such as Hopkins 155, where every
@@ -223,6 +262,9 @@ impl Default for SegmentConfig {
             spectral: true,
             eigengap: 0.5,
             split_separation: 10.0,
+            merge_ratio: 1.3,
+            merge_max_separation: 30.0,
+            merge_gain: 1.6,
             label_outliers: true,
             refit_sweeps: 15,
             label_cost_scale: 8.0,
@@ -266,6 +308,9 @@ impl SegmentConfig {
         for (field, v) in [
             ("label_cost_scale", self.label_cost_scale),
             ("split_separation", self.split_separation),
+            ("merge_ratio", self.merge_ratio),
+            ("merge_max_separation", self.merge_max_separation),
+            ("merge_gain", self.merge_gain),
             ("max_group_sigma_ratio", self.max_group_sigma_ratio),
         ] {
             if !(v >= 0.0 && v.is_finite()) {
@@ -317,8 +362,12 @@ pub struct ObjectGroup {
     pub rms: f64,
     /// Its noise estimate `σ_g` (the RMS with the subspace's parameters counted), px.
     pub sigma: f64,
-    /// Its fitted affine subspace.
+    /// Its fitted affine subspace (for a group of several pieces, the subspace refitted
+    /// to all its tracks; its `rms` and `sigma` are then the perspective model's).
     pub model: AffineSubspace,
+    /// How many groups of the affine segmentation it holds: more than 1 when the
+    /// perspective-aware merge test joined pieces of one body ([`SegmentConfig::merge_ratio`]).
+    pub pieces: usize,
 }
 
 /// The result of [`segment`].
@@ -340,6 +389,9 @@ pub struct Segmentation {
     /// score. `None` with fewer than two groups, or when a pair has fewer than 4 such
     /// tracks on either side.
     pub separation: Option<f64>,
+    /// The perspective-aware merge tests made, in order ([`SegmentConfig::merge_ratio`];
+    /// empty with a given count or the test off).
+    pub merge_tests: Vec<MergeTest>,
     /// Label cost of a subspace defined on every frame (χ² units; 0 with a given count).
     pub label_cost: f64,
     /// Hypotheses in the pool at the end (sampled plus refits).
@@ -920,21 +972,91 @@ fn segment_tracks<R: Rng + ?Sized>(
             y.len().cmp(&x.len()).then(x[0].cmp(&y[0]))
         });
     }
-    let mut finals_chi: Vec<Vec<Option<f64>>> = Vec::with_capacity(joined.len());
-    for (k, ((_, _, tracks), (model, chi, s2))) in joined.into_iter().enumerate() {
+    // 6. Pieces of one body seen in perspective merged (`merge_ratio`; `perspective`).
+    let mut pieces: Vec<perspective::Piece> = joined
+        .iter()
+        .enumerate()
+        .map(
+            |(g, ((_, _, tracks), (model, chi, _)))| perspective::Piece {
+                tracks: tracks.clone(),
+                own: tracks
+                    .iter()
+                    .map(|&p| {
+                        chi[p]
+                            .filter(|_| info.nu[p] > 0.0)
+                            .map(|c| (c / info.nu[p]).sqrt())
+                    })
+                    .collect(),
+                pieces: 1,
+                perspective: None,
+                origin: g,
+                model: model.clone(),
+            },
+        )
+        .collect();
+    let merge_tests = if !given && cfg.merge_ratio > 0.0 && pieces.len() >= 2 {
+        let pair_separation = |a: usize, b: usize| {
+            let groups = [joined[a].0.2.clone(), joined[b].0.2.clone()];
+            let chi = [&joined[a].1.1, &joined[b].1.1];
+            least_separation(&groups, |i, p| chi[i][p].unwrap_or(f64::INFINITY))
+        };
+        let rules = perspective::Rules {
+            principal_point: bounding_centre(ts),
+            ratio: cfg.merge_ratio,
+            gain: cfg.merge_gain,
+            max_separation: cfg.merge_max_separation,
+            sweeps,
+        };
+        perspective::merge(ts, &mut pieces, &rules, pair_separation)
+    } else {
+        Vec::new()
+    };
+    if merge_tests.iter().any(|t| t.merged) {
+        count_rule = CountRule::PerspectiveMerge;
+    }
+    pieces.sort_by(|a, b| {
+        b.tracks
+            .len()
+            .cmp(&a.tracks.len())
+            .then(a.tracks[0].cmp(&b.tracks[0]))
+    });
+    let mut finals_chi: Vec<Vec<Option<f64>>> = Vec::with_capacity(pieces.len());
+    for (k, piece) in pieces.into_iter().enumerate() {
+        let tracks = piece.tracks;
         for &p in &tracks {
             labels[p] = Label::Object(k);
         }
-        let ss: f64 = tracks.iter().filter_map(|&p| chi[p]).sum();
-        let dof: f64 = tracks.iter().map(|&p| info.nu[p]).sum();
-        ss_all += ss;
-        dof_all += dof;
+        let (model, chi, rms, sigma) = match piece.perspective {
+            None => {
+                let (model, chi, s2) = joined[piece.origin].1.clone();
+                let ss: f64 = tracks.iter().filter_map(|&p| chi[p]).sum();
+                let dof: f64 = tracks.iter().map(|&p| info.nu[p]).sum();
+                ss_all += ss;
+                dof_all += dof;
+                (model, chi, (ss / dof.max(1.0)).sqrt(), s2.sqrt())
+            }
+            Some((rms, sigma)) => {
+                let start = &joined[piece.origin].1.0;
+                let model = ts
+                    .refit_with(start, &tracks, sweeps)
+                    .unwrap_or_else(|| start.clone());
+                for (&p, r) in tracks.iter().zip(&piece.own) {
+                    if let Some(r) = r {
+                        ss_all += info.nu[p] * r * r;
+                        dof_all += info.nu[p];
+                    }
+                }
+                let chi = info.chi(&model);
+                (model, chi, rms, sigma)
+            }
+        };
         finals_chi.push(chi);
         objects.push(ObjectGroup {
             tracks,
-            rms: (ss / dof.max(1.0)).sqrt(),
-            sigma: s2.sqrt(),
+            rms,
+            sigma,
             model,
+            pieces: piece.pieces,
         });
     }
     let members: Vec<Vec<usize>> = objects.iter().map(|o| o.tracks.clone()).collect();
@@ -942,6 +1064,7 @@ fn segment_tracks<R: Rng + ?Sized>(
     Ok(Segmentation {
         count_rule,
         separation,
+        merge_tests,
         labels,
         objects,
         sigma: (ss_all / dof_all.max(1.0)).sqrt(),
@@ -1343,6 +1466,25 @@ fn choose(costs: &Costs<'_>, start: &[usize], cfg: &SegmentConfig, objects: Obje
 }
 
 /// Area of the tracks' bounding box, px² (at least 1).
+/// The centre of the usable observations' bounding box.
+fn bounding_centre(ts: &TrackSubspace) -> [f64; 2] {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in 0..ts.n_tracks() {
+        for &f in ts.frames_of(p) {
+            let q = ts.observation(f as usize, p);
+            for k in 0..2 {
+                lo[k] = lo[k].min(q[k]);
+                hi[k] = hi[k].max(q[k]);
+            }
+        }
+    }
+    if lo[0].is_finite() && lo[1].is_finite() {
+        [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0]
+    } else {
+        [0.0, 0.0]
+    }
+}
+
 fn bounding_area(ts: &TrackSubspace) -> f64 {
     let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
     for p in 0..ts.n_tracks() {
@@ -1593,8 +1735,12 @@ pub fn other_objects<R: Rng + ?Sized>(
     // Without the spectral partition: the candidates are mostly junk (random walks,
     // sliding tracks), whose groups the energy's count includes, and repartitioning them
     // spectrally split the object (Hopkins `cars1`: three groups seen instead of two).
+    // Nor the perspective merge test: each group is judged against the main body below,
+    // and a perspective fit per pair of junk groups would cost the default pipeline time
+    // for no use there.
     let cfg = &SegmentConfig {
         spectral: false,
+        merge_ratio: 0.0,
         ..cfg.clone()
     };
     let seg = match segment_tracks(&ts, cfg, rng, Instant::now()) {

@@ -333,9 +333,17 @@ fn the_eigengap_raises_an_undercounted_small_scene() {
             seed,
         );
         let run = |eigengap: f64, split_separation: f64| {
+            // The perspective merge test (a fit per pair) only with both count rules on,
+            // the defaults: these scenes are affine, and it must not join the bodies.
+            let defaults = eigengap > 0.0 && split_separation > 0.0;
             let cfg = SegmentConfig {
                 eigengap,
                 split_separation,
+                merge_ratio: if defaults {
+                    SegmentConfig::default().merge_ratio
+                } else {
+                    0.0
+                },
                 ..SegmentConfig::default()
             };
             segment(&meas, &cfg, &mut StdRng::seed_from_u64(7)).unwrap()
@@ -391,8 +399,15 @@ fn noisy_tracks_still_form_groups() {
         5,
     );
     let run = |ratio: f64| {
+        // With the fixed bound the tracks fall into many small groups; the perspective
+        // merge test, a fit per pair of them, has nothing to do with the bound.
         let cfg = SegmentConfig {
             max_group_sigma_ratio: ratio,
+            merge_ratio: if ratio > 0.0 {
+                SegmentConfig::default().merge_ratio
+            } else {
+                0.0
+            },
             ..SegmentConfig::default()
         };
         segment(&meas, &cfg, &mut StdRng::seed_from_u64(3))
