@@ -81,7 +81,8 @@
 //!    subspace of the union does not (the median of `r_A / r_P` at least
 //!    [`SegmentConfig::merge_gain`]) is one body that the affine subspaces cut. Pairs
 //!    whose affine separation exceeds [`SegmentConfig::merge_max_separation`] are not
-//!    fitted. See `perspective`.
+//!    fitted. The tracks no group held are then judged again under each merged group's
+//!    perspective cameras, as in step 5. See `perspective`.
 //!
 //! Groups with fewer than `min_group_tracks` tracks are never kept. Tracks seen in fewer
 //! than `subspace.min_overlap` frames cannot be scored and are labelled
@@ -991,6 +992,7 @@ fn segment_tracks<R: Rng + ?Sized>(
                 perspective: None,
                 origin: g,
                 model: model.clone(),
+                outlier_rms: Vec::new(),
             },
         )
         .collect();
@@ -1000,14 +1002,60 @@ fn segment_tracks<R: Rng + ?Sized>(
             let chi = [&joined[a].1.1, &joined[b].1.1];
             least_separation(&groups, |i, p| chi[i][p].unwrap_or(f64::INFINITY))
         };
+        let mut grouped = vec![false; n];
+        for piece in &pieces {
+            for &p in &piece.tracks {
+                grouped[p] = true;
+            }
+        }
         let rules = perspective::Rules {
             principal_point: bounding_centre(ts),
+            outliers: (0..n)
+                .filter(|&p| scored[p] && !grouped[p] && info.nu[p] > 0.0)
+                .collect(),
             ratio: cfg.merge_ratio,
             gain: cfg.merge_gain,
             max_separation: cfg.merge_max_separation,
             sweeps,
         };
-        perspective::merge(ts, &mut pieces, &rules, pair_separation)
+        let tests = perspective::merge(ts, &mut pieces, &rules, pair_separation);
+        // The outliers judged again under the merged groups' perspective cameras (the
+        // affine pieces could not explain a track the perspective model does), as in `E`.
+        if cfg.label_outliers {
+            let mut add: Vec<Vec<(usize, f64)>> = vec![Vec::new(); pieces.len()];
+            for (i, &p) in rules.outliers.iter().enumerate() {
+                let best = pieces
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(g, piece)| {
+                        let (_, sigma) = piece.perspective?;
+                        let r = (*piece.outlier_rms.get(i)?)?;
+                        let s2 = shared.unwrap_or(sigma * sigma).max(info.sigma2_floor);
+                        Some((g, r, info.nu[p] * r * r / s2 + 2.0 * info.k[p] * s2.ln()))
+                    })
+                    .min_by(|a, b| a.2.total_cmp(&b.2));
+                if let Some((g, r, d)) = best
+                    && d < outlier[p]
+                {
+                    add[g].push((p, r));
+                }
+            }
+            for (piece, extra) in pieces.iter_mut().zip(add) {
+                if extra.is_empty() {
+                    continue;
+                }
+                let mut all: Vec<(usize, Option<f64>)> = piece
+                    .tracks
+                    .iter()
+                    .copied()
+                    .zip(piece.own.iter().copied())
+                    .chain(extra.into_iter().map(|(p, r)| (p, Some(r))))
+                    .collect();
+                all.sort_unstable_by_key(|t| t.0);
+                (piece.tracks, piece.own) = all.into_iter().unzip();
+            }
+        }
+        tests
     } else {
         Vec::new()
     };

@@ -95,11 +95,13 @@ pub(super) struct PerspectiveRms {
 /// Fits one perspective model to `fit` (input track indices) on the frames that see at
 /// least [`MIN_FRAME_TRACKS`] of them, then scores every track of `tracks` under its
 /// cameras (each point triangulated from its entries in those frames), in the order of
-/// `tracks`. `None` when fewer than 7 tracks or 3 frames are left, or the fit fails.
+/// `tracks`; the RMS and σ are over the first `n_counted` of them (the rest are only
+/// scored). `None` when fewer than 7 tracks or 3 frames are left, or the fit fails.
 pub(super) fn perspective_rms(
     ts: &TrackSubspace,
     fit: &[usize],
     tracks: &[usize],
+    n_counted: usize,
     principal_point: [f64; 2],
 ) -> Option<PerspectiveRms> {
     let nf = ts.n_frames();
@@ -215,7 +217,11 @@ pub(super) fn perspective_rms(
         k[o.track] += 1;
     }
     let (mut total, mut n_obs, mut n_pts) = (0.0, 0usize, 0usize);
-    for t in 0..n_scored {
+    let counted = scored[..n_counted.min(tracks.len())]
+        .iter()
+        .filter(|&&s| s)
+        .count();
+    for t in 0..counted {
         if ss[t].is_finite() {
             total += ss[t];
             n_obs += k[t];
@@ -267,6 +273,9 @@ pub(super) struct Piece {
     pub origin: usize,
     /// Its affine subspace (for a merged group, refitted to all its tracks).
     pub model: AffineSubspace,
+    /// For a merged group, the RMS of each of [`Rules::outliers`] under the perspective
+    /// cameras that merged it (empty otherwise).
+    pub outlier_rms: Vec<Option<f64>>,
 }
 
 /// The test of `a` against `b`: the statistics, and the union's fit.
@@ -313,9 +322,12 @@ fn test(
     let mut sample = evenly(&big.tracks, FIT_TRACKS_PER_SIDE);
     sample.extend(evenly(&small.tracks, FIT_TRACKS_PER_SIDE));
     sample.sort_unstable();
-    let Some(fit) = perspective_rms(ts, &sample, &tracks, rules.principal_point) else {
+    let scored: Vec<usize> = tracks.iter().chain(&rules.outliers).copied().collect();
+    let Some(mut fit) = perspective_rms(ts, &sample, &scored, tracks.len(), rules.principal_point)
+    else {
         return (report, None);
     };
+    let outlier_rms = fit.per_track.split_off(tracks.len());
     report.perspective_rms = Some(fit.rms);
     let mut sides: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
     for (u, r) in union.iter().zip(&fit.per_track) {
@@ -353,6 +365,7 @@ fn test(
         perspective: Some((fit.rms, fit.sigma)),
         origin: big.origin,
         model,
+        outlier_rms,
     };
     (report, Some(merged))
 }
@@ -362,6 +375,9 @@ fn test(
 pub(super) struct Rules {
     /// The centre of the tracks' bounding box, the cameras' principal point.
     pub principal_point: [f64; 2],
+    /// The tracks no group holds (labelled outlier so far): scored under each merged
+    /// group's cameras, to be judged again.
+    pub outliers: Vec<usize>,
     pub ratio: f64,
     pub gain: f64,
     pub max_separation: f64,
