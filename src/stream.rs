@@ -12,7 +12,7 @@
 //! row means, so that `G − s sᵀ/N` does not cancel), `C = G − s sᵀ/N`, `t = c + s/N`. Its
 //! eigenvectors are the left singular vectors of `W − t1ᵀ` and its eigenvalues their
 //! squared singular values, so the rank-3 truncation's motion is `M̂ = U₃ Σ₃^{1/2}`, as in
-//! the dense path (Eckart–Young), found by subspace iteration ([`leading_eigen`]). One more
+//! the dense path (Eckart–Young), found by subspace iteration (`leading_eigen`). One more
 //! pass over the entries then
 //! sums, per track, `b_p = Mᵀ(w_p − t)`, `â_p = U₃ᵀ(w_p − t)` and `‖w_p − t‖²`: the point
 //! `s_p = (MᵀM)⁻¹ b_p`, the affine structure `ŝ_p = Σ₃^{-1/2} â_p`, and the residual
