@@ -940,31 +940,14 @@ fn segment_tracks<R: Rng + ?Sized>(
     // in `E`; the groups' subspaces stay those fitted above.
     let mut joined: Vec<(FinalGroup, Fitted)> = groups.into_iter().zip(finals).collect();
     if cfg.label_outliers && !joined.is_empty() {
-        let mut grouped = vec![false; n];
-        for ((_, _, tracks), _) in &joined {
-            for &p in tracks {
-                grouped[p] = true;
-            }
-        }
-        let mut add: Vec<Vec<usize>> = vec![Vec::new(); joined.len()];
-        for p in (0..n).filter(|&p| scored[p] && !grouped[p]) {
-            let best = joined
-                .iter()
-                .enumerate()
-                .filter_map(|(g, (_, (_, chi, s2)))| {
-                    let s2 = shared.unwrap_or(*s2);
-                    chi[p].map(|c| (g, c / s2 + 2.0 * info.k[p] * s2.ln()))
-                })
-                .min_by(|a, b| a.1.total_cmp(&b.1));
-            if let Some((g, d)) = best
-                && d < outlier[p]
-            {
-                add[g].push(p);
-            }
-        }
+        let candidates = ungrouped(&scored, joined.iter().map(|j| &j.0.2));
+        let add = rejoin(&info, &outlier, &candidates, joined.len(), |g, i| {
+            let (_, chi, s2) = &joined[g].1;
+            chi[candidates[i]].map(|c| (c, shared.unwrap_or(*s2)))
+        });
         for (((_, _, tracks), _), extra) in joined.iter_mut().zip(add) {
             if !extra.is_empty() {
-                tracks.extend(extra);
+                tracks.extend(extra.into_iter().map(|i| candidates[i]));
                 tracks.sort_unstable();
             }
         }
@@ -1002,16 +985,11 @@ fn segment_tracks<R: Rng + ?Sized>(
             let chi = [&joined[a].1.1, &joined[b].1.1];
             least_separation(&groups, |i, p| chi[i][p].unwrap_or(f64::INFINITY))
         };
-        let mut grouped = vec![false; n];
-        for piece in &pieces {
-            for &p in &piece.tracks {
-                grouped[p] = true;
-            }
-        }
         let rules = perspective::Rules {
             principal_point: bounding_centre(ts),
-            outliers: (0..n)
-                .filter(|&p| scored[p] && !grouped[p] && info.nu[p] > 0.0)
+            outliers: ungrouped(&scored, pieces.iter().map(|piece| &piece.tracks))
+                .into_iter()
+                .filter(|&p| info.nu[p] > 0.0)
                 .collect(),
             ratio: cfg.merge_ratio,
             gain: cfg.merge_gain,
@@ -1022,24 +1000,12 @@ fn segment_tracks<R: Rng + ?Sized>(
         // The outliers judged again under the merged groups' perspective cameras (the
         // affine pieces could not explain a track the perspective model does), as in `E`.
         if cfg.label_outliers {
-            let mut add: Vec<Vec<(usize, f64)>> = vec![Vec::new(); pieces.len()];
-            for (i, &p) in rules.outliers.iter().enumerate() {
-                let best = pieces
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(g, piece)| {
-                        let (_, sigma) = piece.perspective?;
-                        let r = (*piece.outlier_rms.get(i)?)?;
-                        let s2 = shared.unwrap_or(sigma * sigma).max(info.sigma2_floor);
-                        Some((g, r, info.nu[p] * r * r / s2 + 2.0 * info.k[p] * s2.ln()))
-                    })
-                    .min_by(|a, b| a.2.total_cmp(&b.2));
-                if let Some((g, r, d)) = best
-                    && d < outlier[p]
-                {
-                    add[g].push((p, r));
-                }
-            }
+            let out = &rules.outliers;
+            let add = rejoin(&info, &outlier, out, pieces.len(), |g, i| {
+                let (_, sigma) = pieces[g].perspective?;
+                let r = (*pieces[g].outlier_rms.get(i)?)?;
+                Some((info.nu[out[i]] * r * r, shared.unwrap_or(sigma * sigma)))
+            });
             for (piece, extra) in pieces.iter_mut().zip(add) {
                 if extra.is_empty() {
                     continue;
@@ -1049,10 +1015,14 @@ fn segment_tracks<R: Rng + ?Sized>(
                     .iter()
                     .copied()
                     .zip(piece.own.iter().copied())
-                    .chain(extra.into_iter().map(|(p, r)| (p, Some(r))))
+                    .chain(extra.into_iter().map(|i| (out[i], piece.outlier_rms[i])))
                     .collect();
                 all.sort_unstable_by_key(|t| t.0);
                 (piece.tracks, piece.own) = all.into_iter().unzip();
+                // Its affine subspace refitted to the tracks that joined too.
+                if let Some(m) = ts.refit_with(&piece.model, &piece.tracks, sweeps) {
+                    piece.model = m;
+                }
             }
         }
         tests
@@ -1084,10 +1054,8 @@ fn segment_tracks<R: Rng + ?Sized>(
                 (model, chi, (ss / dof.max(1.0)).sqrt(), s2.sqrt())
             }
             Some((rms, sigma)) => {
-                let start = &joined[piece.origin].1.0;
-                let model = ts
-                    .refit_with(start, &tracks, sweeps)
-                    .unwrap_or_else(|| start.clone());
+                // `perspective::merge` refitted its subspace to its tracks already.
+                let model = piece.model;
                 for (&p, r) in tracks.iter().zip(&piece.own) {
                     if let Some(r) = r {
                         ss_all += info.nu[p] * r * r;
@@ -1513,9 +1481,9 @@ fn choose(costs: &Costs<'_>, start: &[usize], cfg: &SegmentConfig, objects: Obje
     s
 }
 
-/// Area of the tracks' bounding box, px² (at least 1).
-/// The centre of the usable observations' bounding box.
-fn bounding_centre(ts: &TrackSubspace) -> [f64; 2] {
+/// The usable observations' bounding box: `(min, max)` per coordinate (infinite bounds
+/// when there are none).
+fn bounding_box(ts: &TrackSubspace) -> ([f64; 2], [f64; 2]) {
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for p in 0..ts.n_tracks() {
         for &f in ts.frames_of(p) {
@@ -1526,6 +1494,12 @@ fn bounding_centre(ts: &TrackSubspace) -> [f64; 2] {
             }
         }
     }
+    (lo, hi)
+}
+
+/// The centre of the tracks' bounding box (the origin when there are no observations).
+fn bounding_centre(ts: &TrackSubspace) -> [f64; 2] {
+    let (lo, hi) = bounding_box(ts);
     if lo[0].is_finite() && lo[1].is_finite() {
         [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0]
     } else {
@@ -1533,18 +1507,52 @@ fn bounding_centre(ts: &TrackSubspace) -> [f64; 2] {
     }
 }
 
+/// Area of the tracks' bounding box, px² (at least 1).
 fn bounding_area(ts: &TrackSubspace) -> f64 {
-    let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-    for p in 0..ts.n_tracks() {
-        for &fr in ts.frames_of(p) {
-            let [x, y] = ts.observation(fr as usize, p);
-            x0 = x0.min(x);
-            x1 = x1.max(x);
-            y0 = y0.min(y);
-            y1 = y1.max(y);
+    let (lo, hi) = bounding_box(ts);
+    ((hi[0] - lo[0]) * (hi[1] - lo[1])).max(1.0)
+}
+
+/// The scored tracks in none of `groups`, increasing.
+fn ungrouped<'a>(scored: &[bool], groups: impl Iterator<Item = &'a Vec<usize>>) -> Vec<usize> {
+    let mut grouped = vec![false; scored.len()];
+    for tracks in groups {
+        for &p in tracks {
+            grouped[p] = true;
         }
     }
-    ((x1 - x0) * (y1 - y0)).max(1.0)
+    (0..scored.len())
+        .filter(|&p| scored[p] && !grouped[p])
+        .collect()
+}
+
+/// Tracks labelled outlier judged again against `n_groups` groups, as in `E`: track
+/// `candidates[i]` joins the group `g` with the least `D = ν r² / σ² + 2 k ln σ²` when that
+/// is below its outlier cost; `cost(g, i)` gives its `ν r²` and the group's `σ²` (`None`:
+/// `g` cannot score it). Returns, per group, the indices `i` that join it. `O(K n)`.
+fn rejoin(
+    info: &TrackInfo<'_>,
+    outlier: &[f64],
+    candidates: &[usize],
+    n_groups: usize,
+    cost: impl Fn(usize, usize) -> Option<(f64, f64)>,
+) -> Vec<Vec<usize>> {
+    let mut add = vec![Vec::new(); n_groups];
+    for (i, &p) in candidates.iter().enumerate() {
+        let best = (0..n_groups)
+            .filter_map(|g| {
+                let (chi, s2) = cost(g, i)?;
+                let s2 = s2.max(info.sigma2_floor);
+                Some((g, chi / s2 + 2.0 * info.k[p] * s2.ln()))
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((g, d)) = best
+            && d < outlier[p]
+        {
+            add[g].push(i);
+        }
+    }
+    add
 }
 
 /// Each eligible track's `k` nearest eligible tracks by RMS distance over shared frames
