@@ -6,6 +6,31 @@ use rank3::segment::{Label, SegmentConfig, misclassification};
 use rank3::synth::{ObjectMotion, OutlierKind, SynthConfig, SynthObject, generate};
 use rank3::{CameraModel, Config};
 
+/// Misclassification of `labels` over a synthetic scene's object tracks (its random walks
+/// scored apart; a track labelled outlier counts as wrong).
+fn object_error(scene: &rank3::synth::SynthScene, labels: &[Label]) -> f64 {
+    let idx: Vec<usize> = (0..scene.objects.len())
+        .filter(|&p| scene.outlier_tracks[p].is_none())
+        .collect();
+    let found: Vec<i64> = idx.iter().map(|&p| labels[p].code()).collect();
+    let truth: Vec<usize> = idx.iter().map(|&p| scene.objects[p]).collect();
+    misclassification(&found, &truth)
+}
+
+/// The tracks of a data-set file (`None`, saying so, when the data sets are not there).
+fn dataset(rel: &str) -> Option<rank3::Measurements> {
+    let Some(path) = rank3::datasets::find(rel) else {
+        eprintln!("SKIPPED: {rel} not found (set RANK3_DATASETS)");
+        return None;
+    };
+    Some(
+        rank3::table::read_tracks(&path)
+            .unwrap()
+            .table
+            .measurements(),
+    )
+}
+
 /// Three objects and random walks: the groups are found (K automatically), the walks
 /// labelled outliers, and each rotating object's reconstruction matches its true shape up
 /// to a similarity. Complete tracks with a translating object, then partial tracks with
@@ -54,15 +79,7 @@ fn check_scene(missing: f64, third: ObjectMotion) {
     let sizes: Vec<usize> = mb.objects.iter().map(|o| o.tracks.len()).collect();
     assert_eq!(mb.objects.len(), 3, "groups {sizes:?}");
     // Misclassification over the object tracks (walks scored apart).
-    let idx: Vec<usize> = (0..240)
-        .filter(|&p| scene.outlier_tracks[p].is_none())
-        .collect();
-    let found: Vec<i64> = idx
-        .iter()
-        .map(|&p| mb.segmentation.labels[p].code())
-        .collect();
-    let truth: Vec<usize> = idx.iter().map(|&p| scene.objects[p]).collect();
-    let err = misclassification(&found, &truth);
+    let err = object_error(&scene, &mb.segmentation.labels);
     assert!(err <= 0.03, "misclassification {err}, groups {sizes:?}");
     let walks: Vec<usize> = (0..240)
         .filter(|&p| scene.outlier_tracks[p].is_some())
@@ -167,13 +184,9 @@ fn partly_dependent_motions_are_counted_by_their_separation() {
     let err = misclassification(&on.codes(), &h.groups);
     assert!(err <= 0.02, "misclassification {err}");
 
-    let Some(dino) = rank3::datasets::find("dino_trimmed/M_dense.txt") else {
+    let Some(meas) = dataset("dino_trimmed/M_dense.txt") else {
         return;
     };
-    let meas = rank3::table::read_tracks(&dino)
-        .unwrap()
-        .table
-        .measurements();
     for seed in [0, 1] {
         let groups = |split_separation: f64| {
             let cfg = SegmentConfig {
@@ -396,22 +409,13 @@ fn pieces_of_a_body_seen_in_perspective_are_merged() {
         &two.table.measurements(),
         SegmentConfig::default().merge_ratio,
     );
-    let idx: Vec<usize> = (0..two.objects.len())
-        .filter(|&p| two.outlier_tracks[p].is_none())
-        .collect();
-    let truth: Vec<usize> = idx.iter().map(|&p| two.objects[p]).collect();
-    let codes: Vec<i64> = idx.iter().map(|&p| s.labels[p].code()).collect();
     assert_eq!(s.objects.len(), 2, "tests {:?}", s.merge_tests);
-    let err = misclassification(&codes, &truth);
+    let err = object_error(&two, &s.labels);
     assert!(err <= 0.03, "misclassification {err}");
 
-    let Some(house) = rank3::datasets::find("model_house/matrix/M_dense.txt") else {
+    let Some(meas) = dataset("model_house/matrix/M_dense.txt") else {
         return;
     };
-    let meas = rank3::table::read_tracks(&house)
-        .unwrap()
-        .table
-        .measurements();
     let s = run(&meas, SegmentConfig::default().merge_ratio);
     assert_eq!(
         s.objects.len(),
