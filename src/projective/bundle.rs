@@ -662,6 +662,37 @@ fn schur_columns(
     offset: usize,
     rhs: &mut [f64],
 ) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked at run time just above).
+        return unsafe { schur_columns_avx2(inp, range, vals, offset, rhs) };
+    }
+    schur_columns_any(inp, range, vals, offset, rhs)
+}
+
+/// [`schur_columns_any`] compiled with AVX2 enabled (4-lane loops over a block's rows; the
+/// same sums in the same order, so the same values to the bit).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn schur_columns_avx2(
+    inp: &SchurInput<'_>,
+    range: (usize, usize),
+    vals: &mut [f64],
+    offset: usize,
+    rhs: &mut [f64],
+) {
+    schur_columns_any(inp, range, vals, offset, rhs)
+}
+
+/// [`schur_columns`] for any CPU: dispatches on the block sizes.
+#[inline(always)]
+fn schur_columns_any(
+    inp: &SchurInput<'_>,
+    range: (usize, usize),
+    vals: &mut [f64],
+    offset: usize,
+    rhs: &mut [f64],
+) {
     macro_rules! sized {
         ($($c:literal),*) => {
             match (inp.dims.0, inp.dims.1) {
@@ -724,7 +755,9 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
         }
         let vi = &vinv[p];
         let gp = &lins[p].gp;
-        // W_i = J_cᵀ J_x and Y_i = W_i V⁻¹ for every observation of the track.
+        // W_i = J_cᵀ J_x (row-major, c × d) and Y_i = W_i V⁻¹ for every observation of the
+        // track, Y_i stored by columns (`ys[d·c + c1]`) so that a column of a block
+        // `Y_i W_jᵀ` is a contiguous run of `c` values (vectorized below).
         ys.resize(range.len() * cd * pd, 0.0);
         ws.resize(range.len() * cd * pd, 0.0);
         for (i, o) in range.clone().enumerate() {
@@ -738,7 +771,7 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
                     for d1 in 0..pd {
                         s += wb[c1 * pd + d1] * vi[d1 * pd + d2];
                     }
-                    y[c1 * pd + d2] = s;
+                    y[d2 * cd + c1] = s;
                 }
             }
             let f = g.cam[o];
@@ -746,7 +779,7 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
                 for c1 in 0..cd {
                     let mut s = 0.0;
                     for d in 0..pd {
-                        s += y[c1 * pd + d] * gp[d];
+                        s += y[d * cd + c1] * gp[d];
                     }
                     rhs[(f - a) * cd + c1] += s;
                 }
@@ -791,14 +824,16 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
                 let yi = &ys[i * cd * pd..(i + 1) * cd * pd];
                 if fi == fj {
                     for c2 in 0..cd {
-                        let base = cols[c2] - offset - c2;
+                        let base = cols[c2] - offset;
                         let w2 = &wj[c2 * pd..(c2 + 1) * pd];
-                        for c1 in c2..cd {
+                        let out = &mut vals[base..base + (cd - c2)];
+                        for (r, v) in out.iter_mut().enumerate() {
+                            let c1 = c2 + r;
                             let mut s = 0.0;
                             for d in 0..pd {
-                                s += yi[c1 * pd + d] * w2[d];
+                                s += yi[d * cd + c1] * w2[d];
                             }
-                            vals[base + c1] -= s;
+                            *v -= s;
                         }
                     }
                 } else {
@@ -809,15 +844,43 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
                     for c2 in 0..cd {
                         let base = cols[c2] - offset + (cd - c2) + kk * cd;
                         let w2 = &wj[c2 * pd..(c2 + 1) * pd];
-                        for c1 in 0..cd {
-                            let mut s = 0.0;
-                            for d in 0..pd {
-                                s += yi[c1 * pd + d] * w2[d];
-                            }
-                            vals[base + c1] -= s;
-                        }
+                        sub_column(&mut vals[base..base + cd], yi, w2, cd, pd);
                     }
                 }
+            }
+        }
+    }
+}
+
+/// `out[c1] −= Σ_d y[d·c + c1] w[d]` for `c1` in `0..c`: one column of an off-diagonal
+/// block `Y_i W_jᵀ` of the Schur update, `y` stored by columns (`c` = `out.len()`, `d` =
+/// `w.len()`). The slices are cut to their lengths first so that, with the sizes known
+/// at compile time, the loop over `c1` runs without bounds checks, in vector lanes.
+#[inline(always)]
+fn sub_column(out: &mut [f64], y: &[f64], w: &[f64], cd: usize, pd: usize) {
+    let out = &mut out[..cd];
+    let y = &y[..cd * pd];
+    let w = &w[..pd];
+    match pd {
+        3 => {
+            let (y0, rest) = y.split_at(cd);
+            let (y1, y2) = rest.split_at(cd);
+            let (w0, w1, w2) = (w[0], w[1], w[2]);
+            for (((v, a), b), c) in out.iter_mut().zip(y0).zip(y1).zip(&y2[..cd]) {
+                let mut s = 0.0;
+                s += a * w0;
+                s += b * w1;
+                s += c * w2;
+                *v -= s;
+            }
+        }
+        _ => {
+            for (c1, v) in out.iter_mut().enumerate() {
+                let mut s = 0.0;
+                for d in 0..pd {
+                    s += y[d * cd + c1] * w[d];
+                }
+                *v -= s;
             }
         }
     }
