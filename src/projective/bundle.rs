@@ -352,6 +352,11 @@ struct Pattern {
     /// Per camera `g`, the cameras `f > g` that share a track with it (sorted).
     nbrs: Vec<Vec<usize>>,
     col_ptr: Vec<usize>,
+    /// The tracks with observations, by their first camera (stably): the Schur update
+    /// visits them in this order, so that consecutive tracks write to nearby columns of
+    /// the reduced system (in the input's order a long sequence's tracks may jump along
+    /// it, each a walk over cold memory).
+    order: Vec<usize>,
     symbolic: SymbolicSparseColMat<usize>,
     llt: SymbolicLlt<usize>,
 }
@@ -399,6 +404,8 @@ impl Pattern {
             }
             col_ptr.push(row_idx.len());
         }
+        let mut order: Vec<usize> = (0..g.n_pts).filter(|&p| !g.track(p).is_empty()).collect();
+        order.sort_by_key(|&p| g.cam[g.pt_ptr[p]]);
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr.clone(), None, row_idx);
         let llt = SymbolicLlt::try_new(symbolic.as_ref(), Side::Lower)
             .map_err(|e| format!("symbolic Cholesky of the reduced camera system: {e:?}"))?;
@@ -406,6 +413,7 @@ impl Pattern {
             c,
             nbrs,
             col_ptr,
+            order,
             symbolic,
             llt,
         })
@@ -743,14 +751,14 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
     let pd = if PD > 0 { PD } else { pd_rt };
     let mut ys: Vec<f64> = Vec::new();
     let mut ws: Vec<f64> = Vec::new();
-    for p in 0..g.n_pts {
+    for &p in &pattern.order {
         let range = g.track(p);
-        if range.is_empty() {
-            continue;
-        }
-        // Frames increase along a track.
+        // Frames increase along a track; the tracks come by their first frame.
         let (first, last) = (g.cam[range.start], g.cam[range.end - 1]);
-        if last < a || first >= b {
+        if first >= b {
+            break;
+        }
+        if last < a {
             continue;
         }
         let vi = &vinv[p];
