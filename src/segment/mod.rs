@@ -1615,8 +1615,10 @@ fn neighbours(ts: &TrackSubspace, eligible: &[usize], k: usize) -> Vec<Vec<usize
                 })
                 .collect();
             scored.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            scored.truncate(k);
-            (p, scored.into_iter().map(|x| x.1).collect())
+            // A fresh list of `k`: collected from `scored` by value, the list would reuse
+            // its buffer (in-place collection), sized for every candidate — N² memory over
+            // all tracks (6.4 GB at 20 000 tracks).
+            (p, scored.iter().take(k).map(|x| x.1).collect())
         })
         .collect();
     for (p, l) in lists {
