@@ -435,3 +435,54 @@ fn noisy_tracks_still_form_groups() {
         Err(e) => panic!("{e}"),
     }
 }
+
+/// Each track's neighbour list holds its `k` nearest trajectories and no more memory than
+/// that: a list that kept the buffer of all `N` candidates made the lists `N²` in all
+/// (6.9 GB at 20 000 tracks, docs/results.md).
+#[test]
+fn neighbour_lists_are_the_k_nearest_and_sized_k() {
+    let (meas, truth) = scene(
+        12,
+        &[(150, Motion::General), (150, Motion::General)],
+        0,
+        0.0,
+        0.0,
+        3,
+    );
+    let ts = TrackSubspace::new(&meas, &SubspaceConfig::default());
+    let eligible: Vec<usize> = (0..meas.n_points()).collect();
+    let k = 12;
+    let nbrs = neighbours(&ts, &eligible, k);
+    assert_eq!(nbrs.len(), meas.n_points());
+    let dist = |p: usize, q: usize| -> f64 {
+        (0..2 * meas.n_frames())
+            .map(|r| (meas.w[(r, p)] - meas.w[(r, q)]).powi(2))
+            .sum()
+    };
+    for (p, list) in nbrs.iter().enumerate() {
+        assert_eq!(list.len(), k, "track {p}");
+        assert!(
+            list.capacity() <= k,
+            "track {p}: capacity {}",
+            list.capacity()
+        );
+        assert!(!list.contains(&p));
+        // Sorted by trajectory distance (every track sees every frame, so the mean over
+        // shared frames orders them as the whole trajectories do).
+        for pair in list.windows(2) {
+            assert!(dist(p, pair[0]) <= dist(p, pair[1]));
+        }
+    }
+    // Most neighbours are on the track's own object (the two may overlap in the image).
+    let same = nbrs
+        .iter()
+        .enumerate()
+        .flat_map(|(p, l)| l.iter().map(move |&q| (p, q)))
+        .filter(|&(p, q)| truth[p] == truth[q])
+        .count();
+    assert!(
+        same * 10 >= 9 * k * meas.n_points(),
+        "{same} of {}",
+        k * meas.n_points()
+    );
+}
