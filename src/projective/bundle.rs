@@ -662,7 +662,10 @@ fn frame_ranges(pattern: &Pattern, nf: usize, cd: usize, parts: usize) -> Vec<(u
 /// The block sizes of the models in use (`d = 3`, `c` = 5, 6, 7, 11, 12) get their own
 /// copies of the loops with the sizes known at compile time (unrolled and vectorized: the
 /// adjustment of a 2 000-frame corridor, 19 solves, 13.6 → 7.9 s, docs/results.md); other
-/// sizes take the general loops.
+/// sizes take the general loops. On CPUs with AVX2 the loops run in a copy compiled for it
+/// (the same sums in the same order), and the tracks are visited by their first camera
+/// (`Pattern::order`) so that consecutive tracks write to nearby columns (both measured in
+/// docs/results.md, "thirteenth session").
 fn schur_columns(
     inp: &SchurInput<'_>,
     range: (usize, usize),
