@@ -981,7 +981,7 @@ fn segment_tracks<R: Rng + ?Sized>(
         .collect();
     let merge_tests = if !given && cfg.merge_ratio > 0.0 && pieces.len() >= 2 {
         let pair_separation = |a: usize, b: usize| {
-            let groups = [joined[a].0.2.clone(), joined[b].0.2.clone()];
+            let groups = [&joined[a].0.2, &joined[b].0.2];
             let chi = [&joined[a].1.1, &joined[b].1.1];
             least_separation(&groups, |i, p| chi[i][p].unwrap_or(f64::INFINITY))
         };
@@ -1046,7 +1046,11 @@ fn segment_tracks<R: Rng + ?Sized>(
         }
         let (model, chi, rms, sigma) = match piece.perspective {
             None => {
-                let (model, chi, s2) = joined[piece.origin].1.clone();
+                // Not merged: its model is the group's refit (`piece.model` is a copy of it),
+                // and each group is the origin of one piece only.
+                let (_, chi, s2) = &mut joined[piece.origin].1;
+                let (chi, s2) = (std::mem::take(chi), *s2);
+                let model = piece.model;
                 let ss: f64 = tracks.iter().filter_map(|&p| chi[p]).sum();
                 let dof: f64 = tracks.iter().map(|&p| info.nu[p]).sum();
                 ss_all += ss;
@@ -1075,7 +1079,7 @@ fn segment_tracks<R: Rng + ?Sized>(
             pieces: piece.pieces,
         });
     }
-    let members: Vec<Vec<usize>> = objects.iter().map(|o| o.tracks.clone()).collect();
+    let members: Vec<&Vec<usize>> = objects.iter().map(|o| &o.tracks).collect();
     let separation = least_separation(&members, |i, p| finals_chi[i][p].unwrap_or(f64::INFINITY));
     Ok(Segmentation {
         count_rule,
@@ -1328,7 +1332,10 @@ fn pool_r2<'a>(info: &'a TrackInfo<'_>, pool: &'a Pool) -> impl Fn(usize, usize)
 /// count (a subspace defined on other frames than a track's says nothing about it), and a
 /// pair with fewer than 4 such tracks in either group has no measured separation: the
 /// result is then `None`, as with fewer than two groups. O(K² N log N).
-fn least_separation(groups: &[Vec<usize>], rho: impl Fn(usize, usize) -> f64) -> Option<f64> {
+fn least_separation<G: AsRef<[usize]>>(
+    groups: &[G],
+    rho: impl Fn(usize, usize) -> f64,
+) -> Option<f64> {
     let mut worst: Option<f64> = None;
     for a in 0..groups.len() {
         for b in a + 1..groups.len() {
@@ -1336,6 +1343,7 @@ fn least_separation(groups: &[Vec<usize>], rho: impl Fn(usize, usize) -> f64) ->
                 .iter()
                 .map(|&(own, other)| {
                     groups[own]
+                        .as_ref()
                         .iter()
                         .map(|&p| (rho(own, p), rho(other, p)))
                         .filter(|(o, t)| o.is_finite() && t.is_finite())
