@@ -69,9 +69,10 @@
 //!
 //! With `n_obs` observations, `k_p` the number of frames seeing track `p`, camera tangent
 //! dimension `c` and point dimension `d`: linearisation `O(n_obs (c + d) m)`; forming `S`
-//! `O(Σ_p k_p² c² d)`; its factorisation depends on the fill of the camera graph —
-//! `O(F b² c³)` for a banded graph of half-bandwidth `b` (a video), `O((cF)³)` only when
-//! every frame shares tracks with every other. Memory: `O(n_obs m (c + d))` for the
+//! `O(Σ_p k_p² c² d)` (at most 4 times that where runs of tracks are multiplied as dense
+//! blocks, at the speed of a matrix product); its factorisation depends on the fill of the
+//! camera graph — `O(F b² c³)` for a banded graph of half-bandwidth `b` (a video),
+//! `O((cF)³)` only when every frame shares tracks with every other. Memory: `O(n_obs m (c + d))` for the
 //! residuals and the camera and point Jacobians (`m (c + 1 + d)` numbers per observation:
 //! 30 for the projective model, 20 for a 6-parameter affine camera; the blocks
 //! `W = J_cᵀ J_x` are formed where they are used, not stored) plus the non-zeros of `S`
@@ -88,11 +89,11 @@
 
 use std::time::Instant;
 
-use faer::Mat;
-use faer::Side;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
+use faer::{Accum, Mat, MatMut, MatRef, Par, Side};
 use rayon::prelude::*;
 
 use crate::completion::linalg;
@@ -288,6 +289,16 @@ pub struct LmConfig {
     /// (measured: docs/results.md).
     #[serde(default = "default_window_relative_tolerance")]
     pub window_relative_tolerance: f64,
+    /// Form the reduced camera system's Schur update by dense matrix products over runs of
+    /// up to 64 tracks that share most of their frames, where that is cheaper than track
+    /// by track (see `schur_columns`); false: track by track everywhere. The same sums up
+    /// to rounding. Default true (measured: docs/results.md, fourteenth session).
+    #[serde(default = "default_dense_schur")]
+    pub dense_schur: bool,
+}
+
+fn default_dense_schur() -> bool {
+    true
 }
 
 fn default_window_relative_tolerance() -> f64 {
@@ -330,6 +341,7 @@ impl Default for LmConfig {
             noise_tolerance: 0.01,
             noise_window: 10,
             window_relative_tolerance: 1e-6,
+            dense_schur: true,
         }
     }
 }
@@ -357,12 +369,16 @@ struct Pattern {
     /// the reduced system (in the input's order a long sequence's tracks may jump along
     /// it, each a walk over cold memory).
     order: Vec<usize>,
+    /// `order` cut into runs of consecutive tracks (see [`Chunk`]), in order.
+    chunks: Vec<Chunk>,
+    /// The chunks' camera sets, one after the other (each sorted).
+    chunk_cams: Vec<usize>,
     symbolic: SymbolicSparseColMat<usize>,
     llt: SymbolicLlt<usize>,
 }
 
 impl Pattern {
-    fn new(g: &Graph, c: usize, k: usize) -> Result<Self, String> {
+    fn new(g: &Graph, c: usize, k: usize, dense: bool) -> Result<Self, String> {
         let (cptr, cpts) = g.by_camera();
         let mut mark = vec![usize::MAX; g.n_cams];
         let mut nbrs = vec![Vec::new(); g.n_cams];
@@ -406,6 +422,10 @@ impl Pattern {
         }
         let mut order: Vec<usize> = (0..g.n_pts).filter(|&p| !g.track(p).is_empty()).collect();
         order.sort_by_key(|&p| g.cam[g.pt_ptr[p]]);
+        let (mut chunks, chunk_cams) = chunks(g, &order);
+        if !dense {
+            chunks.iter_mut().for_each(|c| c.dense = false);
+        }
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr.clone(), None, row_idx);
         let llt = SymbolicLlt::try_new(symbolic.as_ref(), Side::Lower)
             .map_err(|e| format!("symbolic Cholesky of the reduced camera system: {e:?}"))?;
@@ -414,6 +434,8 @@ impl Pattern {
             nbrs,
             col_ptr,
             order,
+            chunks,
+            chunk_cams,
             symbolic,
             llt,
         })
@@ -451,6 +473,67 @@ impl Pattern {
     fn nnz(&self) -> usize {
         *self.col_ptr.last().unwrap_or(&0)
     }
+}
+
+/// A run of consecutive tracks of [`Pattern::order`] whose Schur update is done as one
+/// dense product when `dense` (see [`schur_columns`]): `tracks` indexes `order`, `cams`
+/// indexes [`Pattern::chunk_cams`] (the sorted union of the tracks' cameras).
+struct Chunk {
+    tracks: std::ops::Range<usize>,
+    cams: std::ops::Range<usize>,
+    dense: bool,
+}
+
+/// At most this many tracks per chunk: `CHUNK_TRACKS · d` is the inner dimension of the
+/// chunk's product (192 for `d = 3`), where faer's kernels run near their peak.
+const CHUNK_TRACKS: usize = 64;
+/// A chunk stops growing when its padded product, `|U|² · |T|` for `|T|` tracks over the
+/// union `U` of their cameras, would exceed this multiple of the exact work `Σ k_p²`
+/// (zeros where a track does not see a camera of the union): the dense kernels are about
+/// ten times faster per operation than the blocked loop (docs/results.md).
+const CHUNK_PADDING: usize = 4;
+/// Chunks with fewer tracks than this, or fewer cameras, take the per-track loop.
+const CHUNK_MIN_TRACKS: usize = 8;
+const CHUNK_MIN_CAMS: usize = 4;
+
+/// Cuts `order` greedily into [`Chunk`]s: each takes the next tracks while it has fewer
+/// than [`CHUNK_TRACKS`] and its padded work stays within [`CHUNK_PADDING`] times the
+/// exact. The cut depends on the graph only (not on the number of threads). `O(n_obs)`
+/// plus the sorting of each chunk's cameras.
+fn chunks(g: &Graph, order: &[usize]) -> (Vec<Chunk>, Vec<usize>) {
+    let mut stamp = vec![usize::MAX; g.n_cams];
+    let mut chunks = Vec::new();
+    let mut cams = Vec::new();
+    let mut i = 0;
+    while i < order.len() {
+        let (start, cam_start) = (i, cams.len());
+        let mut exact = 0usize;
+        while i < order.len() {
+            let range = g.track(order[i]);
+            let k = range.len();
+            let new = range.clone().filter(|&o| stamp[g.cam[o]] != start).count();
+            let (t, u) = (i - start + 1, cams.len() - cam_start + new);
+            if t > 1 && (t > CHUNK_TRACKS || u * u * t > CHUNK_PADDING * (exact + k * k)) {
+                break;
+            }
+            for o in range {
+                let f = g.cam[o];
+                if stamp[f] != start {
+                    stamp[f] = start;
+                    cams.push(f);
+                }
+            }
+            exact += k * k;
+            i += 1;
+        }
+        cams[cam_start..].sort_unstable();
+        chunks.push(Chunk {
+            tracks: start..i,
+            cams: cam_start..cams.len(),
+            dense: i - start >= CHUNK_MIN_TRACKS && cams.len() - cam_start >= CHUNK_MIN_CAMS,
+        });
+    }
+    (chunks, cams)
 }
 
 /// Outcome of [`minimize`].
@@ -666,6 +749,17 @@ fn frame_ranges(pattern: &Pattern, nf: usize, cd: usize, parts: usize) -> Vec<(u
 /// (the same sums in the same order), and the tracks are visited by their first camera
 /// (`Pattern::order`) so that consecutive tracks write to nearby columns (both measured in
 /// docs/results.md, "thirteenth session").
+///
+/// **Dense products over runs of tracks** ([`Chunk`], with [`LmConfig::dense_schur`]): for
+/// up to [`CHUNK_TRACKS`] consecutive tracks over the union `U` of their frames, the
+/// update of every block at once is `P = Y Wᵀ`, `Y` (`|U|c × |T|d`) holding each track's
+/// `Y_i` in its frames' rows and zeros elsewhere, `W` the same for `W_i` over the range's
+/// frames; `P`'s lower part (faer's matrix product, one thread per range) is then
+/// subtracted block by block where the pattern has a block (the others are zero: no track
+/// of the run sees both frames). The runs are cut so that the padded work stays within
+/// [`CHUNK_PADDING`] times the exact; faer's kernels run 5–10 times faster per operation
+/// than the blocked loop (a complete 150 × 400 projective problem: 0.55 → 0.07–0.13 s per
+/// assembly; docs/results.md, fourteenth session).
 fn schur_columns(
     inp: &SchurInput<'_>,
     range: (usize, usize),
@@ -743,6 +837,164 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
     let SchurInput {
         g,
         pattern,
+        dims: (cd_rt, pd_rt, _, _),
+        ..
+    } = *inp;
+    let cd = if CD > 0 { CD } else { cd_rt };
+    let pd = if PD > 0 { PD } else { pd_rt };
+    let mut ys: Vec<f64> = Vec::new();
+    let mut ws: Vec<f64> = Vec::new();
+    let (mut ybuf, mut wbuf, mut pbuf) = (Vec::new(), Vec::new(), Vec::new());
+    for ch in &pattern.chunks {
+        let tracks = &pattern.order[ch.tracks.clone()];
+        // The tracks come by their first frame.
+        if g.cam[g.pt_ptr[tracks[0]]] >= b {
+            break;
+        }
+        let cams = &pattern.chunk_cams[ch.cams.clone()];
+        if cams[cams.len() - 1] < a {
+            continue;
+        }
+        if !ch.dense {
+            for &p in tracks {
+                if track_blocks::<CD, PD>(inp, p, (a, b), rhs, vals, offset, &mut ys, &mut ws) {
+                    track_pairs::<CD, PD>(inp, p, (a, b), vals, offset, &ys, &ws);
+                }
+            }
+            continue;
+        }
+        // The chunk's cameras from `a` on are the rows of its product, those in `a..b` its
+        // columns: `P = Y Wᵀ` with `Y` (rows: camera u, component c1; columns: track t,
+        // component d) holding `Y_i = W_i V⁻¹` where track t sees camera u and zeros
+        // elsewhere, and `W` the same for `W_i` over the columns' cameras.
+        let v0 = cams.partition_point(|&f| f < a);
+        let v1 = cams.partition_point(|&f| f < b);
+        let (rows, cols, inner) = ((cams.len() - v0) * cd, (v1 - v0) * cd, tracks.len() * pd);
+        ybuf.clear();
+        ybuf.resize(rows * inner, 0.0);
+        wbuf.clear();
+        wbuf.resize(cols * inner, 0.0);
+        for (t, &p) in tracks.iter().enumerate() {
+            if !track_blocks::<CD, PD>(inp, p, (a, b), rhs, vals, offset, &mut ys, &mut ws) {
+                continue;
+            }
+            let mut u = v0;
+            for (i, o) in g.track(p).enumerate() {
+                let f = g.cam[o];
+                if f < a {
+                    continue;
+                }
+                while cams[u] < f {
+                    u += 1;
+                }
+                let r0 = (u - v0) * cd;
+                let (y, w) = (
+                    &ys[i * cd * pd..(i + 1) * cd * pd],
+                    &ws[i * cd * pd..(i + 1) * cd * pd],
+                );
+                for d in 0..pd {
+                    let col = (t * pd + d) * rows + r0;
+                    ybuf[col..col + cd].copy_from_slice(&y[d * cd..(d + 1) * cd]);
+                    if f < b {
+                        let col = (t * pd + d) * cols + r0;
+                        for c1 in 0..cd {
+                            wbuf[col + c1] = w[c1 * pd + d];
+                        }
+                    }
+                }
+            }
+        }
+        pbuf.clear();
+        pbuf.resize(rows * cols, 0.0);
+        {
+            let y = MatRef::from_column_major_slice(&ybuf, rows, inner);
+            let w = MatRef::from_column_major_slice(&wbuf, cols, inner);
+            let prod = MatMut::from_column_major_slice_mut(&mut pbuf, rows, cols);
+            let (top, bottom) = prod.split_at_row_mut(cols);
+            let (y_top, y_bottom) = y.split_at_row(cols);
+            triangular::matmul(
+                top,
+                BlockStructure::TriangularLower,
+                Accum::Replace,
+                y_top,
+                BlockStructure::Rectangular,
+                w.transpose(),
+                BlockStructure::Rectangular,
+                1.0,
+                Par::Seq,
+            );
+            faer::linalg::matmul::matmul(
+                bottom,
+                Accum::Replace,
+                y_bottom,
+                w.transpose(),
+                1.0,
+                Par::Seq,
+            );
+        }
+        // Scatter: block (fi, fj) of the product into S where the pattern has it (the other
+        // blocks are zero: no track of the chunk sees both frames).
+        for v in 0..v1 - v0 {
+            let fj = cams[v0 + v];
+            let cols_fj = &pattern.col_ptr[fj * cd..(fj + 1) * cd];
+            let nbrs = &pattern.nbrs[fj];
+            for c2 in 0..cd {
+                let base = cols_fj[c2] - offset;
+                let pc = &pbuf[(v * cd + c2) * rows..(v * cd + c2 + 1) * rows];
+                for (out, x) in vals[base..base + cd - c2]
+                    .iter_mut()
+                    .zip(&pc[v * cd + c2..(v + 1) * cd])
+                {
+                    *out -= x;
+                }
+            }
+            let mut kk = 0;
+            for u in v + 1..cams.len() - v0 {
+                let fi = cams[v0 + u];
+                while kk < nbrs.len() && nbrs[kk] < fi {
+                    kk += 1;
+                }
+                if kk == nbrs.len() {
+                    break;
+                }
+                if nbrs[kk] != fi {
+                    continue;
+                }
+                for c2 in 0..cd {
+                    let base = cols_fj[c2] - offset + (cd - c2) + kk * cd;
+                    let pc =
+                        &pbuf[(v * cd + c2) * rows + u * cd..(v * cd + c2) * rows + (u + 1) * cd];
+                    for (out, x) in vals[base..base + cd].iter_mut().zip(pc) {
+                        *out -= x;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The blocks of track `p` that [`schur_columns`] needs for the cameras `a..b`: `W_i =
+/// J_cᵀ J_x` (row-major, `c × d`, in `ws`) and `Y_i = W_i V⁻¹` (stored by columns,
+/// `ys[d·c + c1]`, so that a column of a block `Y_i W_jᵀ` is a contiguous run of `c`
+/// values) for every observation of the track; also adds the track's share of the
+/// right-hand side, `W_f V⁻¹ g_p`, and of the shared-parameter coupling `S_{g,f} −= Y_g
+/// W_fᵀ` for its frames in `a..b`. `false` (and nothing done) when the track has no
+/// frame from `a` on or none before `b` (it then has no pair in the range's columns).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn track_blocks<const CD: usize, const PD: usize>(
+    inp: &SchurInput<'_>,
+    p: usize,
+    (a, b): (usize, usize),
+    rhs: &mut [f64],
+    vals: &mut [f64],
+    offset: usize,
+    ys: &mut Vec<f64>,
+    ws: &mut Vec<f64>,
+) -> bool {
+    let SchurInput {
+        g,
+        pattern,
         dims: (cd_rt, pd_rt, k, m),
         lin,
         stride,
@@ -752,111 +1004,126 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
     } = *inp;
     let cd = if CD > 0 { CD } else { cd_rt };
     let pd = if PD > 0 { PD } else { pd_rt };
-    let mut ys: Vec<f64> = Vec::new();
-    let mut ws: Vec<f64> = Vec::new();
-    for &p in &pattern.order {
-        let range = g.track(p);
-        // Frames increase along a track; the tracks come by their first frame.
-        let (first, last) = (g.cam[range.start], g.cam[range.end - 1]);
-        if first >= b {
-            break;
+    let range = g.track(p);
+    // Frames increase along a track.
+    let (first, last) = (g.cam[range.start], g.cam[range.end - 1]);
+    if first >= b || last < a {
+        return false;
+    }
+    let vi = &vinv[p];
+    let gp = &lins[p].gp;
+    ys.resize(range.len() * cd * pd, 0.0);
+    ws.resize(range.len() * cd * pd, 0.0);
+    for (i, o) in range.clone().enumerate() {
+        let wb = &mut ws[i * cd * pd..(i + 1) * cd * pd];
+        w_block(&lin[o * stride..(o + 1) * stride], (cd, pd, k, m), wb);
+        let wb = &ws[i * cd * pd..(i + 1) * cd * pd];
+        let y = &mut ys[i * cd * pd..(i + 1) * cd * pd];
+        for c1 in 0..cd {
+            for d2 in 0..pd {
+                let mut s = 0.0;
+                for d1 in 0..pd {
+                    s += wb[c1 * pd + d1] * vi[d1 * pd + d2];
+                }
+                y[d2 * cd + c1] = s;
+            }
         }
-        if last < a {
-            continue;
-        }
-        let vi = &vinv[p];
-        let gp = &lins[p].gp;
-        // W_i = J_cᵀ J_x (row-major, c × d) and Y_i = W_i V⁻¹ for every observation of the
-        // track, Y_i stored by columns (`ys[d·c + c1]`) so that a column of a block
-        // `Y_i W_jᵀ` is a contiguous run of `c` values (vectorized below).
-        ys.resize(range.len() * cd * pd, 0.0);
-        ws.resize(range.len() * cd * pd, 0.0);
-        for (i, o) in range.clone().enumerate() {
-            let wb = &mut ws[i * cd * pd..(i + 1) * cd * pd];
-            w_block(&lin[o * stride..(o + 1) * stride], (cd, pd, k, m), wb);
-            let wb = &ws[i * cd * pd..(i + 1) * cd * pd];
-            let y = &mut ys[i * cd * pd..(i + 1) * cd * pd];
+        let f = g.cam[o];
+        if (a..b).contains(&f) {
             for c1 in 0..cd {
-                for d2 in 0..pd {
-                    let mut s = 0.0;
-                    for d1 in 0..pd {
-                        s += wb[c1 * pd + d1] * vi[d1 * pd + d2];
-                    }
-                    y[d2 * cd + c1] = s;
+                let mut s = 0.0;
+                for d in 0..pd {
+                    s += y[d * cd + c1] * gp[d];
                 }
+                rhs[(f - a) * cd + c1] += s;
             }
+        }
+    }
+    if k > 0 {
+        let yg = &ygs[p * k * pd..(p + 1) * k * pd];
+        for (i, o) in range.clone().enumerate() {
             let f = g.cam[o];
-            if (a..b).contains(&f) {
-                for c1 in 0..cd {
-                    let mut s = 0.0;
-                    for d in 0..pd {
-                        s += y[d * cd + c1] * gp[d];
-                    }
-                    rhs[(f - a) * cd + c1] += s;
-                }
-            }
-        }
-        if k > 0 {
-            let yg = &ygs[p * k * pd..(p + 1) * k * pd];
-            for (i, o) in range.clone().enumerate() {
-                let f = g.cam[o];
-                if !(a..b).contains(&f) {
-                    continue;
-                }
-                let wb = &ws[i * cd * pd..(i + 1) * cd * pd];
-                for c1 in 0..cd {
-                    for k1 in 0..k {
-                        let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * wb[c1 * pd + d]).sum();
-                        vals[pattern.glob_in_cam(f, c1, k1) - offset] -= s;
-                    }
-                }
-            }
-        }
-        // Column blocks (fj in a..b), rows fi ≥ fj: the later observations of the track.
-        let n = range.len();
-        for j in 0..n {
-            let oj = range.start + j;
-            let fj = g.cam[oj];
-            if fj < a {
+            if !(a..b).contains(&f) {
                 continue;
             }
-            if fj >= b {
-                break;
+            let wb = &ws[i * cd * pd..(i + 1) * cd * pd];
+            for c1 in 0..cd {
+                for k1 in 0..k {
+                    let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * wb[c1 * pd + d]).sum();
+                    vals[pattern.glob_in_cam(f, c1, k1) - offset] -= s;
+                }
             }
-            let wj = &ws[j * cd * pd..(j + 1) * cd * pd];
-            let cols = &pattern.col_ptr[fj * cd..(fj + 1) * cd];
-            let nbrs = &pattern.nbrs[fj];
-            // Column c2 of block (fj, fj) holds rows c2..cd from cols[c2]; of block
-            // (fi, fj), fi > fj, rows 0..cd from cols[c2] + (cd − c2) + kk·cd, kk the
-            // place of fi among fj's neighbours (increasing with i: a forward scan).
-            let mut kk = 0;
-            for i in j..n {
-                let fi = g.cam[range.start + i];
-                let yi = &ys[i * cd * pd..(i + 1) * cd * pd];
-                if fi == fj {
-                    for c2 in 0..cd {
-                        let base = cols[c2] - offset;
-                        let w2 = &wj[c2 * pd..(c2 + 1) * pd];
-                        let out = &mut vals[base..base + (cd - c2)];
-                        for (r, v) in out.iter_mut().enumerate() {
-                            let c1 = c2 + r;
-                            let mut s = 0.0;
-                            for d in 0..pd {
-                                s += yi[d * cd + c1] * w2[d];
-                            }
-                            *v -= s;
+        }
+    }
+    true
+}
+
+/// The pairs of track `p` in the columns of the cameras `a..b`, one at a time: `S_{fi,fj}
+/// −= Y_i W_jᵀ` for its observations `i`, `j` with `fj` in `a..b` and `fi ≥ fj` (from
+/// the blocks [`track_blocks`] left in `ys`, `ws`).
+#[inline(always)]
+fn track_pairs<const CD: usize, const PD: usize>(
+    inp: &SchurInput<'_>,
+    p: usize,
+    (a, b): (usize, usize),
+    vals: &mut [f64],
+    offset: usize,
+    ys: &[f64],
+    ws: &[f64],
+) {
+    let SchurInput {
+        g,
+        pattern,
+        dims: (cd_rt, pd_rt, _, _),
+        ..
+    } = *inp;
+    let cd = if CD > 0 { CD } else { cd_rt };
+    let pd = if PD > 0 { PD } else { pd_rt };
+    let range = g.track(p);
+    // Column blocks (fj in a..b), rows fi ≥ fj: the later observations of the track.
+    let n = range.len();
+    for j in 0..n {
+        let oj = range.start + j;
+        let fj = g.cam[oj];
+        if fj < a {
+            continue;
+        }
+        if fj >= b {
+            break;
+        }
+        let wj = &ws[j * cd * pd..(j + 1) * cd * pd];
+        let cols = &pattern.col_ptr[fj * cd..(fj + 1) * cd];
+        let nbrs = &pattern.nbrs[fj];
+        // Column c2 of block (fj, fj) holds rows c2..cd from cols[c2]; of block
+        // (fi, fj), fi > fj, rows 0..cd from cols[c2] + (cd − c2) + kk·cd, kk the
+        // place of fi among fj's neighbours (increasing with i: a forward scan).
+        let mut kk = 0;
+        for i in j..n {
+            let fi = g.cam[range.start + i];
+            let yi = &ys[i * cd * pd..(i + 1) * cd * pd];
+            if fi == fj {
+                for c2 in 0..cd {
+                    let base = cols[c2] - offset;
+                    let w2 = &wj[c2 * pd..(c2 + 1) * pd];
+                    let out = &mut vals[base..base + (cd - c2)];
+                    for (r, v) in out.iter_mut().enumerate() {
+                        let c1 = c2 + r;
+                        let mut s = 0.0;
+                        for d in 0..pd {
+                            s += yi[d * cd + c1] * w2[d];
                         }
+                        *v -= s;
                     }
-                } else {
-                    while nbrs[kk] < fi {
-                        kk += 1;
-                    }
-                    debug_assert_eq!(nbrs[kk], fi);
-                    for c2 in 0..cd {
-                        let base = cols[c2] - offset + (cd - c2) + kk * cd;
-                        let w2 = &wj[c2 * pd..(c2 + 1) * pd];
-                        sub_column(&mut vals[base..base + cd], yi, w2, cd, pd);
-                    }
+                }
+            } else {
+                while nbrs[kk] < fi {
+                    kk += 1;
+                }
+                debug_assert_eq!(nbrs[kk], fi);
+                for c2 in 0..cd {
+                    let base = cols[c2] - offset + (cd - c2) + kk * cd;
+                    let w2 = &wj[c2 * pd..(c2 + 1) * pd];
+                    sub_column(&mut vals[base..base + cd], yi, w2, cd, pd);
                 }
             }
         }
@@ -1338,7 +1605,7 @@ pub fn minimize_shared<M: BundleModel>(
         model.res_dim(),
     );
     let (nf, np, nobs) = (g.n_cams, g.n_pts, g.n_obs());
-    let pattern = Pattern::new(g, cd, k)?;
+    let pattern = Pattern::new(g, cd, k, cfg.dense_schur)?;
     let ns = nf * cd + k;
     let n_res = (nobs * m).max(1) as f64;
     let rms = |c: f64| (c / n_res).sqrt() * progress.rms_scale;
@@ -1989,4 +2256,90 @@ pub fn minimize_shared<M: BundleModel>(
         costs,
         schur_nnz: pattern.nnz(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A graph of `np` tracks over `nf` cameras, track `p` seeing `len(p)` consecutive
+    /// cameras from `start(p)`.
+    fn graph(
+        nf: usize,
+        np: usize,
+        start: impl Fn(usize) -> usize,
+        len: impl Fn(usize) -> usize,
+    ) -> Graph {
+        let mut pt_ptr = vec![0];
+        let mut cam = Vec::new();
+        for p in 0..np {
+            let a = start(p);
+            cam.extend(a..(a + len(p)).min(nf));
+            pt_ptr.push(cam.len());
+        }
+        let w = vec![[0.0; 2]; cam.len()];
+        Graph {
+            n_cams: nf,
+            n_pts: np,
+            pt_ptr,
+            cam,
+            w,
+        }
+    }
+
+    /// The chunks cover the track order once, in order; each chunk's cameras are the sorted
+    /// union of its tracks'; a dense chunk has at least `CHUNK_MIN_TRACKS` tracks and its
+    /// padded product is within `CHUNK_PADDING` times the exact work. A complete table
+    /// is cut into dense chunks of `CHUNK_TRACKS` tracks over every camera; tracks of
+    /// varied lengths along a sequence still go mostly to dense chunks.
+    #[test]
+    fn chunks_cover_the_tracks_and_bound_the_padding() {
+        let check = |g: &Graph| -> (usize, usize) {
+            let mut order: Vec<usize> = (0..g.n_pts).collect();
+            order.sort_by_key(|&p| g.cam[g.pt_ptr[p]]);
+            let (chunks, cams) = chunks(g, &order);
+            let mut next = 0;
+            let (mut dense_tracks, mut total) = (0, 0);
+            for c in &chunks {
+                assert_eq!(c.tracks.start, next);
+                assert!(c.tracks.end > c.tracks.start);
+                next = c.tracks.end;
+                let mut union: Vec<usize> = order[c.tracks.clone()]
+                    .iter()
+                    .flat_map(|&p| g.cam[g.track(p)].to_vec())
+                    .collect();
+                union.sort_unstable();
+                union.dedup();
+                assert_eq!(&cams[c.cams.clone()], &union[..]);
+                let exact: usize = order[c.tracks.clone()]
+                    .iter()
+                    .map(|&p| g.track(p).len().pow(2))
+                    .sum();
+                let t = c.tracks.len();
+                total += t;
+                if c.dense {
+                    dense_tracks += t;
+                    assert!((CHUNK_MIN_TRACKS..=CHUNK_TRACKS).contains(&t));
+                    assert!(union.len() * union.len() * t <= CHUNK_PADDING * exact);
+                }
+            }
+            assert_eq!(next, order.len());
+            (dense_tracks, total)
+        };
+        let complete = graph(30, 200, |_| 0, |_| 30);
+        assert_eq!(check(&complete), (200, 200));
+        let mut order: Vec<usize> = (0..200).collect();
+        order.sort_by_key(|&p| complete.cam[complete.pt_ptr[p]]);
+        let (chunks, _) = chunks(&complete, &order);
+        assert_eq!(chunks.len(), 200usize.div_ceil(CHUNK_TRACKS));
+        assert!(chunks.iter().all(|c| c.cams.len() == 30));
+        // A video: 5 000 tracks of 3–40 frames starting along 1 000 frames.
+        let video = graph(1000, 5000, |p| (p * 7919) % 960, |p| 3 + (p * 31) % 38);
+        let (dense, total) = check(&video);
+        assert_eq!(total, 5000);
+        assert!(
+            dense * 2 > total,
+            "{dense} of {total} tracks in dense chunks"
+        );
+    }
 }
