@@ -53,31 +53,8 @@ where
     if k_lo > k_hi || k_hi >= n {
         return None;
     }
-    let cmp = |a: &f64, b: &f64| a.total_cmp(b);
-    let select = |mut v: Vec<f64>, a: usize, b: usize| -> [f64; 2] {
-        let (left, hi, _) = v.select_nth_unstable_by(b, cmp);
-        let hi = *hi;
-        let lo = if a == b {
-            hi
-        } else {
-            // The a-th is the (b − 1 − a)-th largest of the b values left of the b-th.
-            let m = b - 1 - a;
-            *left.select_nth_unstable_by(m, |x, y| y.total_cmp(x)).1
-        };
-        [lo, hi]
-    };
-    let gather_all = || -> Vec<f64> {
-        let mut all = Vec::with_capacity(n);
-        all.par_extend(
-            (0..parts)
-                .into_par_iter()
-                .with_min_len(16)
-                .flat_map_iter(&part),
-        );
-        all
-    };
     if n <= 4 * SAMPLE {
-        return Some((select(gather_all(), k_lo, k_hi), n));
+        return Some((select(gather_all(parts, &part, n), k_lo, k_hi), n));
     }
     // Pass 2: every `step`-th value in part order.
     let step = n.div_ceil(SAMPLE);
@@ -97,7 +74,50 @@ where
                 part(i).skip(first).step_by(step)
             }),
     );
-    sample.sort_unstable_by(cmp);
+    Some((bracket_select(parts, &part, sample, n, (k_lo, k_hi)), n))
+}
+
+/// The `a`-th and `b`-th smallest of `v` (`a ≤ b < v.len()`), by selection.
+fn select(mut v: Vec<f64>, a: usize, b: usize) -> [f64; 2] {
+    let cmp = |a: &f64, b: &f64| a.total_cmp(b);
+    let (left, hi, _) = v.select_nth_unstable_by(b, cmp);
+    let hi = *hi;
+    let lo = if a == b {
+        hi
+    } else {
+        // The a-th is the (b − 1 − a)-th largest of the b values left of the b-th.
+        let m = b - 1 - a;
+        *left.select_nth_unstable_by(m, |x, y| y.total_cmp(x)).1
+    };
+    [lo, hi]
+}
+
+/// Every value of the parts, in one buffer of `n`.
+fn gather_all<I: Iterator<Item = f64>>(
+    parts: usize,
+    part: &(impl Fn(usize) -> I + Sync),
+    n: usize,
+) -> Vec<f64> {
+    let mut all = Vec::with_capacity(n);
+    all.par_extend(
+        (0..parts)
+            .into_par_iter()
+            .with_min_len(16)
+            .flat_map_iter(part),
+    );
+    all
+}
+
+/// Passes 2 (the sample's bracket) and 3 of [`order_statistics`]: from the unsorted
+/// systematic `sample` of the `n` values, the ranks `(k_lo, k_hi)`.
+fn bracket_select<I: Iterator<Item = f64>>(
+    parts: usize,
+    part: &(impl Fn(usize) -> I + Sync),
+    mut sample: Vec<f64>,
+    n: usize,
+    (k_lo, k_hi): (usize, usize),
+) -> [f64; 2] {
+    sample.sort_unstable_by(|a, b| a.total_cmp(b));
     let s = sample.len();
     let eps = 4.0 * (s as f64).sqrt() + 64.0;
     let at = |k: usize, shift: f64| {
@@ -128,10 +148,57 @@ where
             },
         );
     if below <= k_lo && k_hi < below + inside.len() {
-        Some((select(inside, k_lo - below, k_hi - below), n))
+        select(inside, k_lo - below, k_hi - below)
     } else {
-        Some((select(gather_all(), k_lo, k_hi), n))
+        select(gather_all(parts, part, n), k_lo, k_hi)
     }
+}
+
+/// [`order_statistics`] for parts whose values are known by index: part `i` holds
+/// `counts[i]` values, the `j`-th of them `value(i, j)`. The counting pass is not needed
+/// and the sample (pass 2) evaluates only the sampled values, so the values are computed
+/// about once each (pass 3) instead of three times: for values that cost more than
+/// reading them (e.g. an entry's distance to a model) this is most of the work. Same
+/// result as [`order_statistics`] on the same values, to the bit.
+pub fn order_statistics_indexed(
+    counts: &[usize],
+    value: impl Fn(usize, usize) -> f64 + Sync,
+    ranks: impl Fn(usize) -> (usize, usize),
+) -> Option<([f64; 2], usize)> {
+    let value = &value;
+    let part = |i: usize| (0..counts[i]).map(move |j| value(i, j));
+    let n: usize = counts.iter().sum();
+    if n == 0 {
+        return None;
+    }
+    let (k_lo, k_hi) = ranks(n);
+    if k_lo > k_hi || k_hi >= n {
+        return None;
+    }
+    if n <= 4 * SAMPLE {
+        return Some((select(gather_all(counts.len(), &part, n), k_lo, k_hi), n));
+    }
+    let step = n.div_ceil(SAMPLE);
+    let mut offsets = Vec::with_capacity(counts.len());
+    let mut acc = 0;
+    for &c in counts {
+        offsets.push(acc);
+        acc += c;
+    }
+    let mut sample: Vec<f64> = Vec::new();
+    sample.par_extend(
+        (0..counts.len())
+            .into_par_iter()
+            .with_min_len(16)
+            .flat_map_iter(|i| {
+                let first = (step - offsets[i] % step) % step;
+                (first..counts[i]).step_by(step).map(move |j| value(i, j))
+            }),
+    );
+    Some((
+        bracket_select(counts.len(), &part, sample, n, (k_lo, k_hi)),
+        n,
+    ))
 }
 
 /// The median of the values the parts yield: the middle one, or for an even count the
@@ -171,6 +238,20 @@ mod tests {
         };
         let got = median_of_parts(parts.len(), |i| parts[i].iter().copied());
         assert_eq!(got.to_bits(), want.to_bits(), "n = {n}");
+        let counts: Vec<usize> = parts.iter().map(|p| p.len()).collect();
+        let mid = |n: usize| (n.saturating_sub(1) / 2, n / 2);
+        if n > 0 {
+            let ([a, b], count) =
+                order_statistics_indexed(&counts, |i, j| parts[i][j], mid).unwrap();
+            assert_eq!(count, n);
+            assert_eq!(
+                [a.to_bits(), b.to_bits()],
+                [all[(n - 1) / 2].to_bits(), all[n / 2].to_bits()],
+                "indexed, n = {n}"
+            );
+        } else {
+            assert!(order_statistics_indexed(&counts, |i, j| parts[i][j], mid).is_none());
+        }
         let k = n / 3;
         let (v, count) =
             order_statistics(parts.len(), |i| parts[i].iter().copied(), |_| (k, k + 1)).unwrap();
@@ -181,8 +262,9 @@ mod tests {
         );
     }
 
-    /// Exact against a full sort: small and large counts (bracketed and not), ties, parts
-    /// sorted in the order of their values (a systematic sample's worst case), and empty.
+    /// Exact against a full sort, by iterators and by index: small and large counts
+    /// (bracketed and not), ties, parts sorted in the order of their values (a systematic
+    /// sample's worst case), and empty.
     #[test]
     fn order_statistics_are_exact() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(5);
