@@ -503,25 +503,56 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             // (biased low: trimming keeps the best frames), then from the threshold-based fits;
             // each distance scaled by 1/sqrt(1 − 3/(2k)) for the 3 coordinates fitted from k
             // frames; σ_e = median / sqrt(2 ln 2).
+            // The frames where the model is defined, per inlier track (borrowed when they
+            // are all of the track's frames: the usual case).
+            let defined: Vec<std::borrow::Cow<'_, [u32]>> = inl
+                .par_iter()
+                .map(|&p| {
+                    let frames = est.frames_of(p);
+                    if frames.iter().all(|&fr| model.defined[fr as usize]) {
+                        std::borrow::Cow::Borrowed(frames)
+                    } else {
+                        std::borrow::Cow::Owned(
+                            frames
+                                .iter()
+                                .copied()
+                                .filter(|&fr| model.defined[fr as usize])
+                                .collect(),
+                        )
+                    }
+                })
+                .collect();
             let scale_of = |fits: &[Option<[f64; 3]>]| -> Option<f64> {
                 // The median over every entry, on all cores, without a buffer of them all
-                // ([`select::median_of_parts`]; exact).
-                let distances = |j: usize| {
+                // ([`select::order_statistics_indexed`]; exact): the `i`-th distance of
+                // inlier track `j`, each scaled by its leverage.
+                let counts: Vec<usize> = inl
+                    .iter()
+                    .zip(&defined)
+                    .map(|(&p, d)| if fits[p].is_some() { d.len() } else { 0 })
+                    .collect();
+                let lev: Vec<f64> = defined
+                    .iter()
+                    .map(|d| (1.0 - 3.0 / (2.0 * d.len() as f64)).max(0.1).sqrt())
+                    .collect();
+                let distance = |j: usize, i: usize| {
                     let p = inl[j];
-                    let model = &model;
-                    let est = &est;
-                    let defined = move || {
-                        est.frames_of(p)
-                            .iter()
-                            .filter(move |&&fr| model.defined[fr as usize])
-                    };
-                    fits[p].into_iter().flat_map(move |s| {
-                        let k = defined().count() as f64;
-                        let lev = (1.0 - 3.0 / (2.0 * k)).max(0.1).sqrt();
-                        defined().map(move |&fr| est.dist2(model, p, fr as usize, &s).sqrt() / lev)
-                    })
+                    let s = fits[p].as_ref().expect("counted only with a fit");
+                    est.dist2(&model, p, defined[j][i] as usize, s).sqrt() / lev[j]
                 };
-                let med = select::median_of_parts(inl.len(), distances);
+                let mid = |n: usize| {
+                    if n % 2 == 1 {
+                        (n / 2, n / 2)
+                    } else {
+                        (n / 2 - 1, n / 2)
+                    }
+                };
+                let ([a, b], _) = select::order_statistics_indexed(&counts, distance, mid)?;
+                let med = if a.total_cmp(&b) == std::cmp::Ordering::Equal {
+                    b
+                } else {
+                    0.5 * (a + b)
+                };
                 (!med.is_nan()).then(|| (med / 1.177_410_022_515_474_8).max(floor))
             };
             // Only the inlier tracks' fits enter the scale.
@@ -565,24 +596,32 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             let thr0 = config
                 .entry_threshold_px
                 .unwrap_or((entry_k * sigma_e).max(config.min_entry_threshold_px));
-            let fits0: Vec<Option<[f64; 3]>> = (0..n)
+            let fits0: Vec<Option<EntryFit>> = (0..n)
                 .into_par_iter()
-                .map(|p| {
-                    if is_inl[p] {
-                        fit(p, thr0).map(|f| f.s)
-                    } else {
-                        None
-                    }
-                })
+                .map(|p| if is_inl[p] { fit(p, thr0) } else { None })
                 .collect();
-            if let Some(sg) = scale_of(&fits0) {
+            let coords0: Vec<Option<[f64; 3]>> =
+                fits0.iter().map(|f| f.as_ref().map(|f| f.s)).collect();
+            if let Some(sg) = scale_of(&coords0) {
                 sigma_e = sg;
             }
             let entry_thr = config
                 .entry_threshold_px
                 .unwrap_or((entry_k * sigma_e).max(config.min_entry_threshold_px));
-            let fits: Vec<Option<EntryFit>> =
-                (0..n).into_par_iter().map(|p| fit(p, entry_thr)).collect();
+            // At the same threshold (e.g. both at the floor `min_entry_threshold_px`) the
+            // inlier tracks' fits are those just made.
+            let same = entry_thr.to_bits() == thr0.to_bits();
+            let fits: Vec<Option<EntryFit>> = fits0
+                .into_par_iter()
+                .enumerate()
+                .map(|(p, f0)| {
+                    if same && is_inl[p] {
+                        f0
+                    } else {
+                        fit(p, entry_thr)
+                    }
+                })
+                .collect();
             (fits, entry_thr)
         };
         // χ²_ν(track_probability)/ν for ν = 2k − 3, k = 0..=F (computed once per round).
@@ -1179,24 +1218,49 @@ fn refit_shift_small(
 /// Median (mean of the two middle values for an even count, as [`crate::eval::median`])
 /// by selection, O(len); reorders `v`. NaN for an empty slice.
 /// RMS distance of the observations to their frame's centroid (per coordinate), pixels.
-/// Two passes of [`Measurements::for_each_observed`], `O(F·N)`.
+/// Two passes over the observations, each on all cores by tiles of
+/// [`crate::measurements::TILE_TRACKS`] tracks whose per-row sums are added in tile order
+/// (the result does not depend on the number of threads). `O(F·N)`.
 fn observation_spread(meas: &Measurements) -> f64 {
-    let rows = 2 * meas.n_frames();
-    let (mut sum, mut count) = (vec![0.0; rows], vec![0usize; rows / 2]);
-    meas.for_each_observed(|f, p| {
-        sum[2 * f] += meas.w[(2 * f, p)];
-        sum[2 * f + 1] += meas.w[(2 * f + 1, p)];
-        count[f] += 1;
-    });
+    use crate::measurements::TILE_TRACKS;
+    let (nf, n) = (meas.n_frames(), meas.n_points());
+    let rows = 2 * nf;
+    // Per-row sums over tiles of tracks: `term(r, p)` for observed entries.
+    let row_sums = |term: &(dyn Fn(usize, usize) -> f64 + Sync)| -> Vec<f64> {
+        let parts: Vec<Vec<f64>> = (0..n.div_ceil(TILE_TRACKS))
+            .into_par_iter()
+            .map(|t| {
+                let mut acc = vec![0.0; rows];
+                for p in t * TILE_TRACKS..((t + 1) * TILE_TRACKS).min(n) {
+                    for f in 0..nf {
+                        if meas.visible[f * n + p] {
+                            acc[2 * f] += term(2 * f, p);
+                            acc[2 * f + 1] += term(2 * f + 1, p);
+                        }
+                    }
+                }
+                acc
+            })
+            .collect();
+        let mut sum = vec![0.0; rows];
+        for part in parts {
+            sum.iter_mut().zip(part).for_each(|(s, v)| *s += v);
+        }
+        sum
+    };
+    let count: Vec<usize> = (0..nf)
+        .map(|f| {
+            meas.visible[f * n..(f + 1) * n]
+                .iter()
+                .filter(|&&v| v)
+                .count()
+        })
+        .collect();
+    let sum = row_sums(&|r, p| meas.w[(r, p)]);
     let mean: Vec<f64> = (0..rows)
         .map(|r| sum[r] / count[r / 2].max(1) as f64)
         .collect();
-    let mut ss = vec![0.0; rows];
-    meas.for_each_observed(|f, p| {
-        for r in [2 * f, 2 * f + 1] {
-            ss[r] += (meas.w[(r, p)] - mean[r]).powi(2);
-        }
-    });
+    let ss = row_sums(&|r, p| (meas.w[(r, p)] - mean[r]).powi(2));
     let cnt = 2 * count.iter().sum::<usize>();
     if cnt == 0 {
         0.0
