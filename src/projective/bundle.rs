@@ -824,6 +824,18 @@ struct SchurInput<'a> {
     ygs: &'a [f64],
 }
 
+impl SchurInput<'_> {
+    /// The camera and point tangent sizes: `CD`, `PD` when fixed at compile time (non-zero),
+    /// else those of `dims`.
+    #[inline(always)]
+    fn sizes<const CD: usize, const PD: usize>(&self) -> (usize, usize) {
+        (
+            if CD > 0 { CD } else { self.dims.0 },
+            if PD > 0 { PD } else { self.dims.1 },
+        )
+    }
+}
+
 /// [`schur_columns`] with the camera and point tangent sizes `CD`, `PD` fixed at compile
 /// time (`0`: read from `dims` at run time).
 #[inline(always)]
@@ -834,14 +846,8 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
     offset: usize,
     rhs: &mut [f64],
 ) {
-    let SchurInput {
-        g,
-        pattern,
-        dims: (cd_rt, pd_rt, _, _),
-        ..
-    } = *inp;
-    let cd = if CD > 0 { CD } else { cd_rt };
-    let pd = if PD > 0 { PD } else { pd_rt };
+    let (g, pattern) = (inp.g, inp.pattern);
+    let (cd, pd) = inp.sizes::<CD, PD>();
     let mut ys: Vec<f64> = Vec::new();
     let mut ws: Vec<f64> = Vec::new();
     let (mut ybuf, mut wbuf, mut pbuf) = (Vec::new(), Vec::new(), Vec::new());
@@ -995,15 +1001,14 @@ fn track_blocks<const CD: usize, const PD: usize>(
     let SchurInput {
         g,
         pattern,
-        dims: (cd_rt, pd_rt, k, m),
+        dims: (_, _, k, m),
         lin,
         stride,
         lins,
         vinv,
         ygs,
     } = *inp;
-    let cd = if CD > 0 { CD } else { cd_rt };
-    let pd = if PD > 0 { PD } else { pd_rt };
+    let (cd, pd) = inp.sizes::<CD, PD>();
     let range = g.track(p);
     // Frames increase along a track.
     let (first, last) = (g.cam[range.start], g.cam[range.end - 1]);
@@ -1071,14 +1076,8 @@ fn track_pairs<const CD: usize, const PD: usize>(
     ys: &[f64],
     ws: &[f64],
 ) {
-    let SchurInput {
-        g,
-        pattern,
-        dims: (cd_rt, pd_rt, _, _),
-        ..
-    } = *inp;
-    let cd = if CD > 0 { CD } else { cd_rt };
-    let pd = if PD > 0 { PD } else { pd_rt };
+    let (g, pattern) = (inp.g, inp.pattern);
+    let (cd, pd) = inp.sizes::<CD, PD>();
     let range = g.track(p);
     // Column blocks (fj in a..b), rows fi ≥ fj: the later observations of the track.
     let n = range.len();

@@ -160,7 +160,7 @@ fn check_observations_names_the_first_bad_value_and_the_counts() {
 #[test]
 fn dense_schur_update_matches_the_track_by_track_one() {
     for (missing, seed) in [(0.3, 11), (0.0, 12)] {
-        let (mut meas, _, _) = scene(40, 300, 2.5, missing, seed);
+        let (mut meas, _, _) = scene(30, 160, 2.5, missing, seed);
         let mut rng = StdRng::seed_from_u64(seed);
         for p in 0..meas.n_points() {
             for r in 0..2 * meas.n_frames() {

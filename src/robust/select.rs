@@ -45,25 +45,12 @@ where
         .with_min_len(16)
         .map(|i| part(i).count())
         .collect();
-    let n: usize = counts.iter().sum();
-    if n == 0 {
-        return None;
-    }
-    let (k_lo, k_hi) = ranks(n);
-    if k_lo > k_hi || k_hi >= n {
-        return None;
-    }
+    let (n, (k_lo, k_hi)) = total_and_ranks(&counts, ranks)?;
     if n <= 4 * SAMPLE {
         return Some((select(gather_all(parts, &part, n), k_lo, k_hi), n));
     }
     // Pass 2: every `step`-th value in part order.
-    let step = n.div_ceil(SAMPLE);
-    let mut offsets = Vec::with_capacity(parts);
-    let mut acc = 0;
-    for &c in &counts {
-        offsets.push(acc);
-        acc += c;
-    }
+    let (step, offsets) = sample_step(&counts, n);
     let mut sample: Vec<f64> = Vec::new();
     sample.par_extend(
         (0..parts)
@@ -75,6 +62,32 @@ where
             }),
     );
     Some((bracket_select(parts, &part, sample, n, (k_lo, k_hi)), n))
+}
+
+/// The total count `n` of the parts' values and the wanted ranks; `None` when there are
+/// no values or the ranks are not `k_lo ≤ k_hi < n`.
+fn total_and_ranks(
+    counts: &[usize],
+    ranks: impl Fn(usize) -> (usize, usize),
+) -> Option<(usize, (usize, usize))> {
+    let n: usize = counts.iter().sum();
+    if n == 0 {
+        return None;
+    }
+    let (k_lo, k_hi) = ranks(n);
+    (k_lo <= k_hi && k_hi < n).then_some((n, (k_lo, k_hi)))
+}
+
+/// The systematic sample's step (about [`SAMPLE`] values of `n`) and each part's offset
+/// in the concatenation of the parts.
+fn sample_step(counts: &[usize], n: usize) -> (usize, Vec<usize>) {
+    let mut offsets = Vec::with_capacity(counts.len());
+    let mut acc = 0;
+    for &c in counts {
+        offsets.push(acc);
+        acc += c;
+    }
+    (n.div_ceil(SAMPLE), offsets)
 }
 
 /// The `a`-th and `b`-th smallest of `v` (`a ≤ b < v.len()`), by selection.
@@ -167,24 +180,11 @@ pub fn order_statistics_indexed(
 ) -> Option<([f64; 2], usize)> {
     let value = &value;
     let part = |i: usize| (0..counts[i]).map(move |j| value(i, j));
-    let n: usize = counts.iter().sum();
-    if n == 0 {
-        return None;
-    }
-    let (k_lo, k_hi) = ranks(n);
-    if k_lo > k_hi || k_hi >= n {
-        return None;
-    }
+    let (n, (k_lo, k_hi)) = total_and_ranks(counts, ranks)?;
     if n <= 4 * SAMPLE {
         return Some((select(gather_all(counts.len(), &part, n), k_lo, k_hi), n));
     }
-    let step = n.div_ceil(SAMPLE);
-    let mut offsets = Vec::with_capacity(counts.len());
-    let mut acc = 0;
-    for &c in counts {
-        offsets.push(acc);
-        acc += c;
-    }
+    let (step, offsets) = sample_step(counts, n);
     let mut sample: Vec<f64> = Vec::new();
     sample.par_extend(
         (0..counts.len())
