@@ -72,8 +72,8 @@
 //! `O(Σ_p k_p² c² d)` (at most 4 times that where runs of tracks are multiplied as dense
 //! blocks, at the speed of a matrix product); its factorisation depends on the fill of the
 //! camera graph — `O(F b² c³)` for a banded graph of half-bandwidth `b` (a video),
-//! `O((cF)³)` only when every frame shares tracks with every other. Memory: `O(n_obs m (c + d))` for the
-//! residuals and the camera and point Jacobians (`m (c + 1 + d)` numbers per observation:
+//! `O((cF)³)` only when every frame shares tracks with every other. Memory:
+//! `O(n_obs m (c + d))` for the residuals and the camera and point Jacobians (`m (c + 1 + d)` numbers per observation:
 //! 30 for the projective model, 20 for a 6-parameter affine camera; the blocks
 //! `W = J_cᵀ J_x` are formed where they are used, not stored) plus the non-zeros of `S`
 //! and of its factor; nothing is `O(F·N)`. Tracks are linearised in
@@ -453,8 +453,16 @@ impl Pattern {
             let k = self.nbrs[g]
                 .binary_search(&f)
                 .unwrap_or_else(|_| unreachable!());
-            base + (c - col) + k * c + r
+            self.off_diagonal(g, col, k) + r
         }
+    }
+
+    /// Value index of the first row of column `col` of block `(nbrs[g][k], g)`: column
+    /// `col` of camera `g` holds the diagonal block's rows `col..c`, then `c` rows per
+    /// neighbour in order.
+    #[inline]
+    fn off_diagonal(&self, g: usize, col: usize, k: usize) -> usize {
+        self.col_ptr[g * self.c + col] + (self.c - col) + k * self.c
     }
 
     /// Value index of the shared-unknown row `r` in column `col` of camera `g`.
@@ -875,6 +883,11 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
         // elsewhere, and `W` the same for `W_i` over the columns' cameras.
         let v0 = cams.partition_point(|&f| f < a);
         let v1 = cams.partition_point(|&f| f < b);
+        if v0 == v1 {
+            // No track of the chunk is seen in `a..b` (they span the range with a gap):
+            // nothing of theirs goes to the range's columns or right-hand side.
+            continue;
+        }
         let (rows, cols, inner) = ((cams.len() - v0) * cd, (v1 - v0) * cd, tracks.len() * pd);
         ybuf.clear();
         ybuf.resize(rows * inner, 0.0);
@@ -967,7 +980,7 @@ fn schur_columns_sized<const CD: usize, const PD: usize>(
                     continue;
                 }
                 for c2 in 0..cd {
-                    let base = cols_fj[c2] - offset + (cd - c2) + kk * cd;
+                    let base = pattern.off_diagonal(fj, c2, kk) - offset;
                     let pc =
                         &pbuf[(v * cd + c2) * rows + u * cd..(v * cd + c2) * rows + (u + 1) * cd];
                     for (out, x) in vals[base..base + cd].iter_mut().zip(pc) {
@@ -1094,7 +1107,7 @@ fn track_pairs<const CD: usize, const PD: usize>(
         let cols = &pattern.col_ptr[fj * cd..(fj + 1) * cd];
         let nbrs = &pattern.nbrs[fj];
         // Column c2 of block (fj, fj) holds rows c2..cd from cols[c2]; of block
-        // (fi, fj), fi > fj, rows 0..cd from cols[c2] + (cd − c2) + kk·cd, kk the
+        // (fi, fj), fi > fj, rows 0..cd from `Pattern::off_diagonal(fj, c2, kk)`, kk the
         // place of fi among fj's neighbours (increasing with i: a forward scan).
         let mut kk = 0;
         for i in j..n {
@@ -1120,7 +1133,7 @@ fn track_pairs<const CD: usize, const PD: usize>(
                 }
                 debug_assert_eq!(nbrs[kk], fi);
                 for c2 in 0..cd {
-                    let base = cols[c2] - offset + (cd - c2) + kk * cd;
+                    let base = pattern.off_diagonal(fj, c2, kk) - offset;
                     let w2 = &wj[c2 * pd..(c2 + 1) * pd];
                     sub_column(&mut vals[base..base + cd], yi, w2, cd, pd);
                 }

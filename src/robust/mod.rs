@@ -524,8 +524,8 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                 .collect();
             let scale_of = |fits: &[Option<[f64; 3]>]| -> Option<f64> {
                 // The median over every entry, on all cores, without a buffer of them all
-                // ([`select::order_statistics_indexed`]; exact): the `i`-th distance of
-                // inlier track `j`, each scaled by its leverage.
+                // ([`select::median_indexed`]; exact): the `i`-th distance of inlier track
+                // `j`, each scaled by its leverage.
                 let counts: Vec<usize> = inl
                     .iter()
                     .zip(&defined)
@@ -540,19 +540,7 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                     let s = fits[p].as_ref().expect("counted only with a fit");
                     est.dist2(&model, p, defined[j][i] as usize, s).sqrt() / lev[j]
                 };
-                let mid = |n: usize| {
-                    if n % 2 == 1 {
-                        (n / 2, n / 2)
-                    } else {
-                        (n / 2 - 1, n / 2)
-                    }
-                };
-                let ([a, b], _) = select::order_statistics_indexed(&counts, distance, mid)?;
-                let med = if a.total_cmp(&b) == std::cmp::Ordering::Equal {
-                    b
-                } else {
-                    0.5 * (a + b)
-                };
+                let med = select::median_indexed(&counts, distance);
                 (!med.is_nan()).then(|| (med / 1.177_410_022_515_474_8).max(floor))
             };
             // Only the inlier tracks' fits enter the scale.
@@ -1215,8 +1203,6 @@ fn refit_shift_small(
     (0..nf).all(|f| shift[f] <= tol * used[f].max(1) as f64)
 }
 
-/// Median (mean of the two middle values for an even count, as [`crate::eval::median`])
-/// by selection, O(len); reorders `v`. NaN for an empty slice.
 /// RMS distance of the observations to their frame's centroid (per coordinate), pixels.
 /// Two passes over the observations, each on all cores by tiles of
 /// [`crate::measurements::TILE_TRACKS`] tracks whose per-row sums are added in tile order

@@ -207,15 +207,29 @@ pub fn median_of_parts<I>(parts: usize, part: impl Fn(usize) -> I + Sync) -> f64
 where
     I: Iterator<Item = f64>,
 {
-    let ranks = |n: usize| {
-        let mid = n / 2;
-        if n % 2 == 1 {
-            (mid, mid)
-        } else {
-            (mid - 1, mid)
-        }
-    };
-    match order_statistics(parts, part, ranks) {
+    median_of(order_statistics(parts, part, median_ranks))
+}
+
+/// [`median_of_parts`] for parts whose values are known by index (see
+/// [`order_statistics_indexed`]): each value is computed once.
+pub fn median_indexed(counts: &[usize], value: impl Fn(usize, usize) -> f64 + Sync) -> f64 {
+    median_of(order_statistics_indexed(counts, value, median_ranks))
+}
+
+/// The ranks of the median of `n ≥ 1` values: the middle one, or the two middle ones.
+fn median_ranks(n: usize) -> (usize, usize) {
+    let mid = n / 2;
+    if n % 2 == 1 {
+        (mid, mid)
+    } else {
+        (mid - 1, mid)
+    }
+}
+
+/// The median from the order statistics at [`median_ranks`]: the middle value, or the
+/// mean of the two middle ones; NaN when there are no values.
+fn median_of(stats: Option<([f64; 2], usize)>) -> f64 {
+    match stats {
         Some(([a, b], _)) if a.total_cmp(&b) == Ordering::Equal => b,
         Some(([a, b], _)) => 0.5 * (a + b),
         None => f64::NAN,
