@@ -260,6 +260,81 @@ fn single_object_pipeline_rejects_a_second_object_as_tracks() {
     );
 }
 
+/// The same with gross entries spread over the table (3 % of the entries, 15–60 px off):
+/// nearly every track carries a flag, but glitches land far off, so the robust pass calls
+/// none of those flags ambiguous and the other-objects search looks only at the rejected
+/// tracks and those with an ambiguous flag (before, every flagged track: nearly all). The
+/// second object is still found and rejected whole, and no track of the main body is lost.
+#[test]
+fn second_object_is_found_among_spread_gross_entries() {
+    use rand::SeedableRng;
+    let cfg = SynthConfig {
+        camera: CameraModel::Orthographic,
+        frames: 30,
+        points: 200,
+        noise: 0.5,
+        gross: 0.03,
+        objects: vec![SynthObject {
+            share: 0.2,
+            motion: ObjectMotion::Rotating,
+        }],
+        seed: 7,
+        ..Default::default()
+    };
+    let scene = generate(&cfg).unwrap();
+    let second: Vec<usize> = (0..200).filter(|&p| scene.objects[p] == 1).collect();
+    let r = rank3::robust::robust_filter(
+        &scene.table.measurements(),
+        &rank3::robust::RobustConfig::default(),
+        &mut rand::rngs::StdRng::seed_from_u64(0),
+    )
+    .unwrap();
+    let main_kept: Vec<usize> = (0..200)
+        .filter(|&p| scene.objects[p] == 0 && r.inlier_tracks[p])
+        .collect();
+    let flagged = main_kept
+        .iter()
+        .filter(|&&p| r.flagged_entries.iter().any(|e| e.1 == p))
+        .count();
+    let ambiguous = main_kept
+        .iter()
+        .filter(|&&p| r.ambiguous_flags[p] > 0)
+        .count();
+    assert!(
+        flagged * 2 > main_kept.len(),
+        "{flagged} of {} main-body tracks flagged",
+        main_kept.len()
+    );
+    assert!(
+        ambiguous * 20 <= main_kept.len(),
+        "{ambiguous} of {} main-body tracks with an ambiguous flag",
+        main_kept.len()
+    );
+    let config = Config {
+        camera: CameraModel::Orthographic,
+        ..Default::default()
+    };
+    let rec = rank3::Reconstruction::from_tracks(&scene.table, &config).unwrap();
+    let rb = rec.robust.as_ref().unwrap();
+    assert_eq!(rb.rigid_groups_seen, 2);
+    let rejected: std::collections::HashSet<String> =
+        rb.outlier_tracks.iter().map(|i| i.to_string()).collect();
+    let caught = second
+        .iter()
+        .filter(|p| rejected.contains(&p.to_string()))
+        .count();
+    assert!(
+        caught + 1 >= second.len(),
+        "{caught} of {} rejected",
+        second.len()
+    );
+    assert!(
+        rb.n_outlier_tracks <= caught + 2,
+        "{} main-body tracks rejected",
+        rb.n_outlier_tracks - caught
+    );
+}
+
 /// Hopkins `cars1` (skipped without the data set; a car moving slowly in front of a moving
 /// camera): the affine robust pass alone kept 50 of the car's 77 tracks with 155 of their
 /// entries flagged as gross errors (F1 of the rejections 0.50); the other-objects check
@@ -267,7 +342,9 @@ fn single_object_pipeline_rejects_a_second_object_as_tracks() {
 /// draws; `RANK3_SEEDS=N` runs seeds 0..N). With one pooled noise level the check found the
 /// car on one seed of six; with each model's own (`segment::other_objects`) and the tracks
 /// outside the group re-judged, on all six (66–77 of the car's 77 tracks rejected, 4–8 of
-/// the scene's).
+/// the scene's). Since the search looks at the rejected tracks and those with an ambiguous
+/// flag only (2026-11-29): the car is found on all six seeds, and seed 5 rejects 65 of its
+/// tracks, one short of this test's 85 % (seeds 0–4 pass).
 #[test]
 fn hopkins_second_object_is_rejected_as_tracks() {
     let Some(path) = rank3::datasets::find("hopkins_dev/cars1.txt") else {

@@ -331,6 +331,12 @@ pub struct RobustResult {
     pub inlier_tracks: Vec<bool>,
     /// Gross entries of inlier tracks, (frame, track), sorted (empty without a majority).
     pub flagged_entries: Vec<(usize, usize)>,
+    /// Per track, how many of its flagged entries are *ambiguous* (within
+    /// `gross_entry_factor` × the entry threshold: the worst frames of a track drifting
+    /// from the rigid motion — a point on another object — rather than a glitch, which
+    /// lands far off); 0 for tracks that are not inliers, and for all when
+    /// `gross_entry_factor` ≤ 1 (no flag is then told apart). Empty without a majority.
+    pub ambiguous_flags: Vec<usize>,
     /// Image noise σ per coordinate, pixels (robust estimate from the inlier entries).
     pub noise_sigma: f64,
     /// Track threshold `τ` on the trimmed RMS residual, pixels.
@@ -820,6 +826,12 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             inlier_fraction: frac(n_in),
             rival_fraction: frac(rival),
         },
+        ambiguous_flags: (0..n)
+            .map(|p| match &fits[p] {
+                Some(f) if inlier_tracks[p] && strict => f.ambiguous,
+                _ => 0,
+            })
+            .collect(),
         inlier_tracks,
         flagged_entries: flagged,
         noise_sigma: sigma_e,
@@ -1284,6 +1296,7 @@ fn no_majority(
         },
         inlier_tracks: vec![false; n],
         flagged_entries: Vec::new(),
+        ambiguous_flags: Vec::new(),
         noise_sigma: rr.sigma.unwrap_or(f64::NAN),
         threshold_px: tau,
         entry_threshold_px: f64::NAN,
