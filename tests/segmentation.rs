@@ -205,6 +205,34 @@ fn partly_dependent_motions_are_counted_by_their_separation() {
     }
 }
 
+/// The single-object pipeline (orthographic) on `table`, which must see two rigid groups:
+/// its robust report, and how many of the tracks `second` (by index) it rejected whole
+/// (at least all but one).
+fn second_object_run(
+    table: &rank3::TrackTable,
+    second: &[usize],
+) -> (rank3::reconstruction::RobustReport, usize) {
+    let config = Config {
+        camera: CameraModel::Orthographic,
+        ..Default::default()
+    };
+    let rec = rank3::Reconstruction::from_tracks(table, &config).unwrap();
+    let rb = rec.robust.unwrap();
+    assert_eq!(rb.rigid_groups_seen, 2);
+    let rejected: std::collections::HashSet<String> =
+        rb.outlier_tracks.iter().map(|i| i.to_string()).collect();
+    let caught = second
+        .iter()
+        .filter(|p| rejected.contains(&p.to_string()))
+        .count();
+    assert!(
+        caught + 1 >= second.len(),
+        "{caught} of {} rejected",
+        second.len()
+    );
+    (rb, caught)
+}
+
 /// The single-object pipeline with a clearly separate second rigid object (25 % of the
 /// tracks): the robust report sees two rigid groups and every track of the second object
 /// is rejected whole (the robust pass alone already does that here; the Hopkins test below
@@ -225,24 +253,7 @@ fn single_object_pipeline_rejects_a_second_object_as_tracks() {
     };
     let scene = generate(&cfg).unwrap();
     let second: Vec<usize> = (0..160).filter(|&p| scene.objects[p] == 1).collect();
-    let config = Config {
-        camera: CameraModel::Orthographic,
-        ..Default::default()
-    };
-    let rec = rank3::Reconstruction::from_tracks(&scene.table, &config).unwrap();
-    let rb = rec.robust.as_ref().unwrap();
-    assert_eq!(rb.rigid_groups_seen, 2);
-    let rejected: std::collections::HashSet<String> =
-        rb.outlier_tracks.iter().map(|i| i.to_string()).collect();
-    let caught = second
-        .iter()
-        .filter(|p| rejected.contains(&p.to_string()))
-        .count();
-    assert!(
-        caught + 1 >= second.len(),
-        "{caught} of {} rejected",
-        second.len()
-    );
+    let (rb, _) = second_object_run(&scene.table, &second);
     let flagged_on_second = rb
         .flagged_entries
         .iter()
@@ -310,24 +321,7 @@ fn second_object_is_found_among_spread_gross_entries() {
         "{ambiguous} of {} main-body tracks with an ambiguous flag",
         main_kept.len()
     );
-    let config = Config {
-        camera: CameraModel::Orthographic,
-        ..Default::default()
-    };
-    let rec = rank3::Reconstruction::from_tracks(&scene.table, &config).unwrap();
-    let rb = rec.robust.as_ref().unwrap();
-    assert_eq!(rb.rigid_groups_seen, 2);
-    let rejected: std::collections::HashSet<String> =
-        rb.outlier_tracks.iter().map(|i| i.to_string()).collect();
-    let caught = second
-        .iter()
-        .filter(|p| rejected.contains(&p.to_string()))
-        .count();
-    assert!(
-        caught + 1 >= second.len(),
-        "{caught} of {} rejected",
-        second.len()
-    );
+    let (rb, caught) = second_object_run(&scene.table, &second);
     assert!(
         rb.n_outlier_tracks <= caught + 2,
         "{} main-body tracks rejected",
