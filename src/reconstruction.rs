@@ -1485,6 +1485,7 @@ fn robust_stage(
                 crate::segment::other_objects(
                     &meas_all,
                     model,
+                    r.noise_sigma,
                     &candidates,
                     &crate::segment::SegmentConfig::default(),
                     &mut rng,

@@ -1764,7 +1764,15 @@ fn fit_dof(o: &crate::robust::subspace::TrackFit) -> f64 {
 /// car's gain fell below its label cost on five seeds of six; a ratio of residual sums
 /// does not depend on that estimate. Random walks are explained no better by a subspace of
 /// their own than by `main` (a ratio near 1), and tracks of the main body flagged for a few
-/// gross entries fit `main` as well as any subspace, so neither is returned. Then every
+/// gross entries fit `main` as well as any subspace, so neither is returned. But a group of
+/// many junk tracks can be explained by its own subspace far better than by `main`, at a
+/// noise no rigid body of the video has: a group whose `σ_g` exceeds
+/// `max(max_group_sigma, max_group_sigma_ratio · noise_sigma_px)` (`noise_sigma_px` the
+/// main body's noise) is judged by the rigid consensus of its tracks within that bound
+/// (RANSAC over them, the subspace refitted to the consensus) — the second object among
+/// junk, or no group at all (a synthetic 300-frame table with random-walk outliers: one
+/// rigid group seen, not two; with mixed outliers, the second object's 97 of 100 tracks at
+/// σ_g 21 px). Then every
 /// track outside the groups found (a candidate the segmentation left out, or a track the
 /// robust pass kept whole) joins the group whose subspace explains it better than `main`
 /// by `ν ln(r²_main / r²_own) > 2 ln(2 n_obs)`. Returns the groups as track indices into
@@ -1776,6 +1784,7 @@ fn fit_dof(o: &crate::robust::subspace::TrackFit) -> f64 {
 pub fn other_objects<R: Rng + ?Sized>(
     meas: &Measurements,
     main: &AffineSubspace,
+    noise_sigma_px: f64,
     candidates: &[usize],
     cfg: &SegmentConfig,
     rng: &mut R,
@@ -1785,16 +1794,15 @@ pub fn other_objects<R: Rng + ?Sized>(
         return Ok(Vec::new());
     }
     let (f, n_all) = (meas.n_frames(), meas.n_points());
-    let sub = Measurements::new(
-        faer::Mat::from_fn(2 * f, candidates.len(), |r, j| meas.w[(r, candidates[j])]),
-        (0..f)
-            .flat_map(|fr| {
-                candidates
-                    .iter()
-                    .map(move |&p| meas.visible[fr * n_all + p])
-            })
-            .collect(),
-    );
+    let columns = |cols: &[usize]| {
+        Measurements::new(
+            faer::Mat::from_fn(2 * f, cols.len(), |r, j| meas.w[(r, cols[j])]),
+            (0..f)
+                .flat_map(|fr| cols.iter().map(move |&p| meas.visible[fr * n_all + p]))
+                .collect(),
+        )
+    };
+    let sub = columns(candidates);
     // One estimator over the candidates serves the segmentation and both fits below (a
     // track's fit to `main` depends only on the track and the frames).
     let ts = TrackSubspace::new(&sub, &cfg.subspace);
@@ -1815,13 +1823,51 @@ pub fn other_objects<R: Rng + ?Sized>(
         Err(e) => return Err(e),
     };
     let ln_n = ((2 * meas.n_observed()).max(2) as f64).ln();
-    let mut found: Vec<(&AffineSubspace, Vec<usize>)> = Vec::new();
+    // The largest noise of a rigid group: `max_group_sigma`, or `max_group_sigma_ratio`
+    // times the main body's noise when that is larger.
+    let max_sigma = cfg
+        .max_group_sigma
+        .max(cfg.max_group_sigma_ratio * noise_sigma_px);
+    let mut found: Vec<(AffineSubspace, Vec<usize>)> = Vec::new();
     for g in &seg.objects {
+        // A group noisier than a rigid body of this video holds junk (random walks,
+        // sliding tracks), possibly around an object: only the rigid consensus of its
+        // tracks within `max_sigma` (RANSAC over them) is judged.
+        let (model, tracks) = if g.sigma <= max_sigma {
+            (g.model.clone(), g.tracks.clone())
+        } else {
+            let tracks_in: Vec<usize> = g.tracks.iter().map(|&c| candidates[c]).collect();
+            let gm = columns(&tracks_in);
+            let est = TrackSubspace::new(&gm, &cfg.subspace);
+            let rc = crate::robust::ransac::RansacConfig {
+                threshold_px: Some(max_sigma),
+                ..Default::default()
+            };
+            let Ok(r) = crate::robust::ransac::ransac_observed(
+                &est,
+                g.tracks.len(),
+                &rc,
+                rng,
+                &mut crate::NoopObserver,
+                1,
+            ) else {
+                continue;
+            };
+            let members: Vec<usize> = (0..g.tracks.len())
+                .filter(|&i| r.inliers[i])
+                .map(|i| g.tracks[i])
+                .collect();
+            let (Some(m0), true) = (r.model, members.len() >= cfg.min_group_tracks) else {
+                continue;
+            };
+            let model = ts.refit_with(&m0, &members, cfg.refit_sweeps).unwrap_or(m0);
+            (model, members)
+        };
         // Degrees of freedom and residual sums of the group under both models; a track
         // the main body cannot score at all counts as 9 times its own residual (3σ).
         let (mut dof, mut rss_own, mut rss_main) = (0.0, 0.0, 0.0);
-        for &c in &g.tracks {
-            let Some(o) = ts.track_fit(&g.model, c) else {
+        for &c in &tracks {
+            let Some(o) = ts.track_fit(&model, c) else {
                 continue;
             };
             let nu = fit_dof(&o);
@@ -1835,9 +1881,10 @@ pub fn other_objects<R: Rng + ?Sized>(
         } else {
             0.0
         };
-        let beta = ln_n * (8.0 * g.model.n_defined() as f64 - 9.0).max(0.0);
+        let beta = ln_n * (8.0 * model.n_defined() as f64 - 9.0).max(0.0);
         if gain > beta {
-            found.push((&g.model, g.tracks.iter().map(|&c| candidates[c]).collect()));
+            let tracks = tracks.iter().map(|&c| candidates[c]).collect();
+            found.push((model, tracks));
         }
     }
     if found.is_empty() {
