@@ -205,6 +205,41 @@ fn partly_dependent_motions_are_counted_by_their_separation() {
     }
 }
 
+/// The default configuration with the orthographic camera.
+fn orthographic() -> Config {
+    Config {
+        camera: CameraModel::Orthographic,
+        ..Default::default()
+    }
+}
+
+/// An orthographic scene (0.5 px of noise) with a second rigidly rotating object holding
+/// `share` of the tracks and `gross` of the entries gross, and the second object's tracks.
+fn second_object_scene(
+    frames: usize,
+    points: usize,
+    share: f64,
+    gross: f64,
+    seed: u64,
+) -> (rank3::synth::SynthScene, Vec<usize>) {
+    let cfg = SynthConfig {
+        camera: CameraModel::Orthographic,
+        frames,
+        points,
+        noise: 0.5,
+        gross,
+        objects: vec![SynthObject {
+            share,
+            motion: ObjectMotion::Rotating,
+        }],
+        seed,
+        ..Default::default()
+    };
+    let scene = generate(&cfg).unwrap();
+    let second = (0..points).filter(|&p| scene.objects[p] == 1).collect();
+    (scene, second)
+}
+
 /// The single-object pipeline (orthographic) on `table`, which must see two rigid groups:
 /// its robust report, and how many of the tracks `second` (by index) it rejected whole
 /// (at least all but one).
@@ -212,11 +247,7 @@ fn second_object_run(
     table: &rank3::TrackTable,
     second: &[usize],
 ) -> (rank3::reconstruction::RobustReport, usize) {
-    let config = Config {
-        camera: CameraModel::Orthographic,
-        ..Default::default()
-    };
-    let rec = rank3::Reconstruction::from_tracks(table, &config).unwrap();
+    let rec = rank3::Reconstruction::from_tracks(table, &orthographic()).unwrap();
     let rb = rec.robust.unwrap();
     assert_eq!(rb.rigid_groups_seen, 2);
     let rejected: std::collections::HashSet<String> =
@@ -239,20 +270,7 @@ fn second_object_run(
 /// is the hard case).
 #[test]
 fn single_object_pipeline_rejects_a_second_object_as_tracks() {
-    let cfg = SynthConfig {
-        camera: CameraModel::Orthographic,
-        frames: 24,
-        points: 160,
-        noise: 0.5,
-        objects: vec![SynthObject {
-            share: 0.25,
-            motion: ObjectMotion::Rotating,
-        }],
-        seed: 5,
-        ..Default::default()
-    };
-    let scene = generate(&cfg).unwrap();
-    let second: Vec<usize> = (0..160).filter(|&p| scene.objects[p] == 1).collect();
+    let (scene, second) = second_object_scene(24, 160, 0.25, 0.0, 5);
     let (rb, _) = second_object_run(&scene.table, &second);
     let flagged_on_second = rb
         .flagged_entries
@@ -279,21 +297,7 @@ fn single_object_pipeline_rejects_a_second_object_as_tracks() {
 #[test]
 fn second_object_is_found_among_spread_gross_entries() {
     use rand::SeedableRng;
-    let cfg = SynthConfig {
-        camera: CameraModel::Orthographic,
-        frames: 30,
-        points: 200,
-        noise: 0.5,
-        gross: 0.03,
-        objects: vec![SynthObject {
-            share: 0.2,
-            motion: ObjectMotion::Rotating,
-        }],
-        seed: 7,
-        ..Default::default()
-    };
-    let scene = generate(&cfg).unwrap();
-    let second: Vec<usize> = (0..200).filter(|&p| scene.objects[p] == 1).collect();
+    let (scene, second) = second_object_scene(30, 200, 0.2, 0.03, 7);
     let r = rank3::robust::robust_filter(
         &scene.table.measurements(),
         &rank3::robust::RobustConfig::default(),
@@ -347,11 +351,7 @@ fn random_walks_are_not_another_object() {
         ..Default::default()
     };
     let scene = generate(&cfg).unwrap();
-    let config = Config {
-        camera: CameraModel::Orthographic,
-        ..Default::default()
-    };
-    let rec = rank3::Reconstruction::from_tracks(&scene.table, &config).unwrap();
+    let rec = rank3::Reconstruction::from_tracks(&scene.table, &orthographic()).unwrap();
     let rb = rec.robust.unwrap();
     assert_eq!(rb.rigid_groups_seen, 1);
     assert_eq!(rb.other_object_tracks, 0);
