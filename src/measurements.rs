@@ -64,6 +64,13 @@ impl Measurements {
         Measurements::new(w, visible)
     }
 
+    /// The measurements of the given tracks in every frame ([`Measurements::select`] over
+    /// all frames). `O(F·N')` for the N' tracks.
+    pub fn select_tracks(&self, tracks: &[usize]) -> Measurements {
+        let frames: Vec<usize> = (0..self.n_frames()).collect();
+        self.select(&frames, tracks)
+    }
+
     /// Number of frames F.
     pub fn n_frames(&self) -> usize {
         self.w.nrows() / 2

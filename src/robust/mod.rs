@@ -765,7 +765,7 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
         && rejected.len() >= 8
         && rejected.len() as f64 >= config.max_rival_ratio * n_in as f64
     {
-        let sub = select_columns(meas, &rejected);
+        let sub = meas.select_tracks(&rejected);
         let rest = TrackSubspace::new(&sub, &config.subspace);
         let rc = RansacConfig {
             threshold_px: Some(tau),
@@ -1265,19 +1265,6 @@ fn observation_spread(meas: &Measurements) -> f64 {
     } else {
         (ss.iter().sum::<f64>() / cnt as f64).sqrt()
     }
-}
-
-fn select_columns(meas: &Measurements, cols: &[usize]) -> Measurements {
-    let n = meas.n_points();
-    let f = meas.n_frames();
-    let w = faer::Mat::from_fn(meas.w.nrows(), cols.len(), |r, j| meas.w[(r, cols[j])]);
-    let mut vis = Vec::with_capacity(f * cols.len());
-    for fr in 0..f {
-        for &c in cols {
-            vis.push(meas.visible[fr * n + c]);
-        }
-    }
-    Measurements::new(w, vis)
 }
 
 fn no_majority(

@@ -1780,7 +1780,9 @@ fn fit_dof(o: &crate::robust::subspace::TrackFit) -> f64 {
 /// candidates or no group passes).
 ///
 /// Complexity: that of [`segment`] on the candidates, plus O(F·N) for building the track
-/// estimator over all tracks and O(n_obs · groups) for the comparisons.
+/// estimator over all tracks and O(n_obs · groups) for the comparisons, plus for each group
+/// above the noise bound a RANSAC over its tracks (at most the RANSAC budget of hypotheses,
+/// each scoring the group's observations).
 pub fn other_objects<R: Rng + ?Sized>(
     meas: &Measurements,
     main: &AffineSubspace,
@@ -1793,16 +1795,8 @@ pub fn other_objects<R: Rng + ?Sized>(
     if candidates.len() < 2 * cfg.min_group_tracks {
         return Ok(Vec::new());
     }
-    let (f, n_all) = (meas.n_frames(), meas.n_points());
-    let columns = |cols: &[usize]| {
-        Measurements::new(
-            faer::Mat::from_fn(2 * f, cols.len(), |r, j| meas.w[(r, cols[j])]),
-            (0..f)
-                .flat_map(|fr| cols.iter().map(move |&p| meas.visible[fr * n_all + p]))
-                .collect(),
-        )
-    };
-    let sub = columns(candidates);
+    let n_all = meas.n_points();
+    let sub = meas.select_tracks(candidates);
     // One estimator over the candidates serves the segmentation and both fits below (a
     // track's fit to `main` depends only on the track and the frames).
     let ts = TrackSubspace::new(&sub, &cfg.subspace);
@@ -1837,7 +1831,7 @@ pub fn other_objects<R: Rng + ?Sized>(
             (g.model.clone(), g.tracks.clone())
         } else {
             let tracks_in: Vec<usize> = g.tracks.iter().map(|&c| candidates[c]).collect();
-            let gm = columns(&tracks_in);
+            let gm = meas.select_tracks(&tracks_in);
             let est = TrackSubspace::new(&gm, &cfg.subspace);
             let rc = crate::robust::ransac::RansacConfig {
                 threshold_px: Some(max_sigma),
