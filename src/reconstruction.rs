@@ -249,6 +249,11 @@ pub struct ProjectiveJudgement {
     pub entry_threshold_px: f64,
     /// How many times the fit was run again with a new selection (at most 3).
     pub refits: usize,
+    /// Other rigid objects found by the affine pass that stay rejected whatever the verdict:
+    /// their own rigid motion explains their tracks better than the projective cameras
+    /// fitted without them ([`crate::segment::projective_evidence`]). The others' tracks
+    /// are judged like any track (a piece of the body that only perspective joins to it).
+    pub objects_held_out: usize,
 }
 
 impl RobustReport {
@@ -1364,7 +1369,7 @@ struct Selection {
     /// Gross entries (frame, track) of the kept table, hidden from the fit.
     flagged: Vec<(usize, usize)>,
     /// Other rigid objects the affine pass found (tracks of the kept table).
-    other_groups: Vec<Vec<usize>>,
+    other_groups: Vec<crate::segment::OtherObject>,
     /// `None` when the robust pass is off.
     report: Option<RobustReport>,
 }
@@ -1491,7 +1496,7 @@ fn robust_stage(
                     &mut rng,
                 )
             })?;
-            for &p in sel.other_groups.iter().flatten() {
+            for &p in sel.other_groups.iter().flat_map(|g| &g.tracks) {
                 if sel.inlier[p] {
                     sel.inlier[p] = false;
                     other_object_tracks += 1;
@@ -1576,10 +1581,38 @@ fn projective_verdict_stage(
     };
     let before = sel.inlier.clone();
     let flagged_before = sel.flagged.len();
+    // Another object the affine pass found stays out when its own rigid motion explains it
+    // better than the projective cameras fitted without it: the cameras' spare degrees of
+    // freedom would otherwise bend towards it refit by refit (`projective_evidence`).
+    let mut held_out = vec![false; before.len()];
+    let mut objects_held_out = 0;
+    if let Some(pf) = &fitted.projective
+        && !sel.other_groups.is_empty()
+    {
+        let meas_all = kept.table.measurements();
+        let subspace = crate::segment::SegmentConfig::default().subspace;
+        for g in &sel.other_groups {
+            let e = crate::segment::projective_evidence(
+                &meas_all,
+                g,
+                &fitted.fit_frames,
+                &pf.model,
+                &subspace,
+            );
+            if e.apart() {
+                g.tracks.iter().for_each(|&p| held_out[p] = true);
+                objects_held_out += 1;
+            }
+        }
+    }
     let mut refits = 0;
     let mut last = None;
     while let Some(pf) = &fitted.projective {
-        let v = projective_verdict(kept.table, &fitted, pf, &sel.flagged, rc);
+        let mut v = projective_verdict(kept.table, &fitted, pf, &sel.flagged, rc);
+        (0..v.0.len())
+            .filter(|&p| held_out[p])
+            .for_each(|p| v.0[p] = false);
+        v.1.retain(|&(_, p)| !held_out[p]);
         let changed = v.0 != sel.inlier || v.1 != sel.flagged;
         last = Some((v.2, v.3));
         if !changed || refits == PROJECTIVE_VERDICT_ROUNDS {
@@ -1617,7 +1650,7 @@ fn projective_verdict_stage(
     report.update(kept.table, &kept.frames, &kept.tracks, inlier, &sel.flagged);
     // A group the projective model mostly readmits was a part of the body seen in
     // perspective, not another object.
-    for g in &sel.other_groups {
+    for g in sel.other_groups.iter().map(|g| &g.tracks) {
         let back = g.iter().filter(|&&p| inlier[p]).count();
         if 2 * back > g.len() {
             report.rigid_groups_seen -= 1;
@@ -1642,6 +1675,7 @@ fn projective_verdict_stage(
         noise_sigma_px: sigma,
         entry_threshold_px: tau,
         refits,
+        objects_held_out,
     });
     sel.report = Some(report);
     Ok(fitted)

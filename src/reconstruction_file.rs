@@ -381,6 +381,9 @@ pub struct ProjectiveJudgementRecord {
     #[serde(deserialize_with = "nullable")]
     pub entry_threshold_px: f64,
     pub refits: usize,
+    /// Absent from files written before 2026-11-29 (read as 0).
+    #[serde(default)]
+    pub objects_held_out: usize,
 }
 
 /// `refinement`.

@@ -394,6 +394,95 @@ fn hopkins_second_object_is_rejected_as_tracks() {
     }
 }
 
+/// A nearly planar background (150 points, relief ±1 % of its width) seen in perspective
+/// (focal 800 px, 4 widths away, the camera turning by up to 12° and moving sideways) and a
+/// second object (50 points in a box) turning and moving on its own over it; Gaussian
+/// noise of 0.5 px. Returns the table and the second object's tracks.
+fn planar_scene_with_an_object(frames: usize, seed: u64) -> (rank3::TrackTable, Vec<usize>) {
+    use nalgebra::{Rotation3, Vector3};
+    use rand::{RngExt, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let normal = rand_distr::Normal::new(0.0, 0.5).unwrap();
+    let (n_bg, n_obj) = (150, 50);
+    let mut pts: Vec<Vector3<f64>> = (0..n_bg)
+        .map(|_| {
+            Vector3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-0.02..0.02),
+            )
+        })
+        .collect();
+    pts.extend((0..n_obj).map(|_| {
+        Vector3::new(
+            rng.random_range(-0.25..0.25),
+            rng.random_range(-0.25..0.25),
+            rng.random_range(-0.25..0.25),
+        )
+    }));
+    let mut w = faer::Mat::zeros(2 * frames, n_bg + n_obj);
+    for f in 0..frames {
+        let a = f as f64 / (frames - 1) as f64;
+        // The camera: 8 units from the plane, turning and moving sideways.
+        let cam_r = Rotation3::from_euler_angles(0.2 * a, -0.1 + 0.2 * a, 0.05 * a);
+        let cam_t = Vector3::new(-0.6 * a, 0.3 * a, 8.0);
+        // The object: above the plane, turning about a tilted axis and drifting.
+        let obj_r = Rotation3::from_euler_angles(0.5 * a, 0.3 * a, -0.4 * a);
+        let obj_t = Vector3::new(0.3 + 0.4 * a, -0.2 + 0.2 * a, 0.4);
+        for (p, x) in pts.iter().enumerate() {
+            let xw = if p < n_bg { *x } else { obj_r * x + obj_t };
+            let xc = cam_r * xw + cam_t;
+            for k in 0..2 {
+                w[(2 * f + k, p)] = 800.0 * xc[k] / xc[2] + rng.sample(normal);
+            }
+        }
+    }
+    let meas = rank3::Measurements::new(w, vec![true; frames * (n_bg + n_obj)]);
+    (
+        rank3::TrackTable::from_measurements(&meas),
+        (n_bg..n_bg + n_obj).collect(),
+    )
+}
+
+/// A second object over a nearly planar background, with the CLI's default camera (`auto`):
+/// the projective model fitted to the background leaves 3 of each camera's 11 degrees of
+/// freedom to nothing, and its verdict must not readmit the object the affine pass found.
+/// Before the object was held out by its own rigid motion (2026-11-29) the verdict
+/// readmitted 22–24 of its tracks refit by refit, kept 21–22 of 50 out, flagged 24–47 of
+/// their entries, and saw one rigid group (Hopkins `1R2RC_g12`: 88 of 89 tracks
+/// readmitted). Measured since: 43 and 46 rejected, none readmitted, no background track
+/// lost.
+#[test]
+fn second_object_over_a_plane_stays_rejected_with_the_automatic_camera() {
+    for seed in [1, 2] {
+        let (table, second) = planar_scene_with_an_object(20, seed);
+        let rec = rank3::Reconstruction::from_tracks(
+            &table,
+            &Config {
+                camera: CameraModel::Auto,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let rb = rec.robust.unwrap();
+        assert_eq!(rb.rigid_groups_seen, 2, "seed {seed}");
+        let j = rb.projective.as_ref().expect("the projective verdict ran");
+        assert_eq!(j.objects_held_out, 1, "seed {seed}");
+        let rejected: std::collections::HashSet<String> =
+            rb.outlier_tracks.iter().map(|i| i.to_string()).collect();
+        let caught = second
+            .iter()
+            .filter(|p| rejected.contains(&p.to_string()))
+            .count();
+        assert!(caught >= 40, "seed {seed}: {caught} of 50 rejected");
+        assert!(
+            rb.n_outlier_tracks - caught <= 3,
+            "seed {seed}: {} background tracks rejected",
+            rb.n_outlier_tracks - caught
+        );
+    }
+}
+
 /// The checks of [`hopkins_second_object_is_rejected_as_tracks`] for one configuration.
 fn second_object_rejected(
     h: &rank3::datasets::Hopkins,

@@ -223,14 +223,22 @@ pub fn print_report(rec: &Reconstruction) {
     if let Some(j) = rec.robust.as_ref().and_then(|r| r.projective.as_ref()) {
         info!(
             "projective verdict: {} track(s) readmitted, {} rejected, flagged entries {} → {} \
-             (σ ≈ {:.3} px, entry threshold {:.3} px), {} refit(s)",
+             (σ ≈ {:.3} px, entry threshold {:.3} px), {} refit(s){}",
             j.readmitted_tracks,
             j.rejected_tracks,
             j.flagged_before,
             j.flagged_after,
             j.noise_sigma_px,
             j.entry_threshold_px,
-            j.refits
+            j.refits,
+            if j.objects_held_out > 0 {
+                format!(
+                    "; {} other object(s) kept out (their own motion explains them better)",
+                    j.objects_held_out
+                )
+            } else {
+                String::new()
+            }
         );
     }
     if let Some(p) = &rec.projective {
