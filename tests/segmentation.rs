@@ -448,39 +448,37 @@ fn planar_scene_with_an_object(frames: usize, seed: u64) -> (rank3::TrackTable, 
 /// the projective model fitted to the background leaves 3 of each camera's 11 degrees of
 /// freedom to nothing, and its verdict must not readmit the object the affine pass found.
 /// Before the object was held out by its own rigid motion (2026-11-29) the verdict
-/// readmitted 22–24 of its tracks refit by refit, kept 21–22 of 50 out, flagged 24–47 of
-/// their entries, and saw one rigid group (Hopkins `1R2RC_g12`: 88 of 89 tracks
-/// readmitted). Measured since: 43 and 46 rejected, none readmitted, no background track
-/// lost.
+/// readmitted 22 of its tracks refit by refit, kept 21 of 50 out, flagged 24 of their
+/// entries, and saw one rigid group (seed 2: 24, 22, 47, one group; Hopkins `1R2RC_g12`: 88
+/// of 89 tracks readmitted). Measured since: 43 rejected (seed 2: 46), none readmitted, no
+/// background track lost. One seed: the automatic camera's fits take 18 s in debug.
 #[test]
 fn second_object_over_a_plane_stays_rejected_with_the_automatic_camera() {
-    for seed in [1, 2] {
-        let (table, second) = planar_scene_with_an_object(20, seed);
-        let rec = rank3::Reconstruction::from_tracks(
-            &table,
-            &Config {
-                camera: CameraModel::Auto,
-                ..Default::default()
-            },
-        )
-        .unwrap();
-        let rb = rec.robust.unwrap();
-        assert_eq!(rb.rigid_groups_seen, 2, "seed {seed}");
-        let j = rb.projective.as_ref().expect("the projective verdict ran");
-        assert_eq!(j.objects_held_out, 1, "seed {seed}");
-        let rejected: std::collections::HashSet<String> =
-            rb.outlier_tracks.iter().map(|i| i.to_string()).collect();
-        let caught = second
-            .iter()
-            .filter(|p| rejected.contains(&p.to_string()))
-            .count();
-        assert!(caught >= 40, "seed {seed}: {caught} of 50 rejected");
-        assert!(
-            rb.n_outlier_tracks - caught <= 3,
-            "seed {seed}: {} background tracks rejected",
-            rb.n_outlier_tracks - caught
-        );
-    }
+    let (table, second) = planar_scene_with_an_object(20, 1);
+    let rec = rank3::Reconstruction::from_tracks(
+        &table,
+        &Config {
+            camera: CameraModel::Auto,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let rb = rec.robust.unwrap();
+    assert_eq!(rb.rigid_groups_seen, 2);
+    let j = rb.projective.as_ref().expect("the projective verdict ran");
+    assert_eq!(j.objects_held_out, 1);
+    let rejected: std::collections::HashSet<String> =
+        rb.outlier_tracks.iter().map(|i| i.to_string()).collect();
+    let caught = second
+        .iter()
+        .filter(|p| rejected.contains(&p.to_string()))
+        .count();
+    assert!(caught >= 40, "{caught} of 50 rejected");
+    assert!(
+        rb.n_outlier_tracks - caught <= 3,
+        "{} background tracks rejected",
+        rb.n_outlier_tracks - caught
+    );
 }
 
 /// The checks of [`hopkins_second_object_is_rejected_as_tracks`] for one configuration.
