@@ -240,6 +240,16 @@ fn second_object_scene(
     (scene, second)
 }
 
+/// How many of `tracks` (by index) a robust report rejected as whole tracks.
+fn rejected_among(rb: &rank3::reconstruction::RobustReport, tracks: &[usize]) -> usize {
+    let rejected: std::collections::HashSet<String> =
+        rb.outlier_tracks.iter().map(|i| i.to_string()).collect();
+    tracks
+        .iter()
+        .filter(|p| rejected.contains(&p.to_string()))
+        .count()
+}
+
 /// The single-object pipeline (orthographic) on `table`, which must see two rigid groups:
 /// its robust report, and how many of the tracks `second` (by index) it rejected whole
 /// (at least all but one).
@@ -250,12 +260,7 @@ fn second_object_run(
     let rec = rank3::Reconstruction::from_tracks(table, &orthographic()).unwrap();
     let rb = rec.robust.unwrap();
     assert_eq!(rb.rigid_groups_seen, 2);
-    let rejected: std::collections::HashSet<String> =
-        rb.outlier_tracks.iter().map(|i| i.to_string()).collect();
-    let caught = second
-        .iter()
-        .filter(|p| rejected.contains(&p.to_string()))
-        .count();
+    let caught = rejected_among(&rb, second);
     assert!(
         caught + 1 >= second.len(),
         "{caught} of {} rejected",
@@ -467,12 +472,7 @@ fn second_object_over_a_plane_stays_rejected_with_the_automatic_camera() {
     assert_eq!(rb.rigid_groups_seen, 2);
     let j = rb.projective.as_ref().expect("the projective verdict ran");
     assert_eq!(j.objects_held_out, 1);
-    let rejected: std::collections::HashSet<String> =
-        rb.outlier_tracks.iter().map(|i| i.to_string()).collect();
-    let caught = second
-        .iter()
-        .filter(|p| rejected.contains(&p.to_string()))
-        .count();
+    let caught = rejected_among(&rb, &second);
     assert!(caught >= 40, "{caught} of 50 rejected");
     assert!(
         rb.n_outlier_tracks - caught <= 3,
@@ -497,15 +497,10 @@ fn second_object_rejected(
     let mut sizes = vec![0usize; h.n_groups];
     h.groups.iter().for_each(|&g| sizes[g] += 1);
     let main = (0..h.n_groups).max_by_key(|&g| sizes[g]).unwrap();
-    let rejected: std::collections::HashSet<String> =
-        rb.outlier_tracks.iter().map(|i| i.to_string()).collect();
     let other: Vec<usize> = (0..h.groups.len())
         .filter(|&p| h.groups[p] != main)
         .collect();
-    let caught = other
-        .iter()
-        .filter(|p| rejected.contains(&p.to_string()))
-        .count();
+    let caught = rejected_among(rb, &other);
     assert!(
         caught * 100 >= 85 * other.len(),
         "{caught} of {} rejected",
