@@ -337,6 +337,12 @@ pub struct RobustResult {
     /// lands far off); 0 for tracks that are not inliers, and for all when
     /// `gross_entry_factor` ≤ 1 (no flag is then told apart). Empty without a majority.
     pub ambiguous_flags: Vec<usize>,
+    /// Per track, an inlier kept only by `min_track_threshold_px`: its RMS is above the
+    /// noise test `σ_e sqrt(χ²_ν(track_probability)/ν)` and within the floor — model error
+    /// the floor forgives (perspective under an affine camera), or another object moving
+    /// close to the main body. False for all with a given `ransac.threshold_px`; empty
+    /// without a majority.
+    pub floor_kept: Vec<bool>,
     /// Image noise σ per coordinate, pixels (robust estimate from the inlier entries).
     pub noise_sigma: f64,
     /// Track threshold `τ` on the trimmed RMS residual, pixels.
@@ -832,6 +838,21 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                 _ => 0,
             })
             .collect(),
+        floor_kept: (0..n)
+            .map(|p| match &fits[p] {
+                Some(f) if inlier_tracks[p] && config.ransac.threshold_px.is_none() => {
+                    let (rms, k) = if strict {
+                        f.test_rms()
+                    } else {
+                        (f.rms, f.kept)
+                    };
+                    let nu = (2 * k) as f64 - 3.0;
+                    nu > 0.0
+                        && rms > sigma_e * (chi2_quantile(nu, config.track_probability) / nu).sqrt()
+                }
+                _ => false,
+            })
+            .collect(),
         inlier_tracks,
         flagged_entries: flagged,
         noise_sigma: sigma_e,
@@ -1284,6 +1305,7 @@ fn no_majority(
         inlier_tracks: vec![false; n],
         flagged_entries: Vec::new(),
         ambiguous_flags: Vec::new(),
+        floor_kept: Vec::new(),
         noise_sigma: rr.sigma.unwrap_or(f64::NAN),
         threshold_px: tau,
         entry_threshold_px: f64::NAN,
