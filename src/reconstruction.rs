@@ -1526,16 +1526,19 @@ fn robust_stage(
                         &seg_cfg,
                         &mut rng,
                     )?;
-                    for mut g in more {
-                        if 2 * g.tracks.len() > rest.len() {
-                            continue;
-                        }
-                        g.tracks.retain(|&p| !taken[p]);
-                        if g.tracks.len() >= seg_cfg.min_group_tracks {
-                            groups.push(g);
-                        }
+                    let more: Vec<_> = more
+                        .into_iter()
+                        .filter(|g| 2 * g.tracks.len() <= rest.len())
+                        .collect();
+                    // Groups that would take half the kept tracks or more from the scene
+                    // are pieces of it (a body in perspective under the affine camera: two
+                    // walls seen from 5 widths, each wall a group), not other objects:
+                    // then nothing of this search is kept.
+                    let total: usize = more.iter().map(|g| g.tracks.len()).sum();
+                    if 2 * total < rest.len() {
+                        groups.extend(more);
+                        groups.sort_by_key(|g| std::cmp::Reverse(g.tracks.len()));
                     }
-                    groups.sort_by_key(|g| std::cmp::Reverse(g.tracks.len()));
                 }
                 Ok::<_, Error>(groups)
             })?;
