@@ -31,6 +31,17 @@ fn dataset(rel: &str) -> Option<rank3::Measurements> {
     )
 }
 
+/// The Hopkins sequence `hopkins_dev/NAME.txt` (`None`, saying so, when the data sets are
+/// not there).
+fn hopkins(name: &str) -> Option<rank3::datasets::Hopkins> {
+    let rel = format!("hopkins_dev/{name}.txt");
+    let Some(path) = rank3::datasets::find(&rel) else {
+        eprintln!("SKIPPED: {rel} not found (set RANK3_DATASETS)");
+        return None;
+    };
+    Some(rank3::datasets::read_hopkins(&path).unwrap())
+}
+
 /// Three objects and random walks: the groups are found (K automatically), the walks
 /// labelled outliers, and each rotating object's reconstruction matches its true shape up
 /// to a similarity. Complete tracks with a translating object, then partial tracks with
@@ -125,10 +136,9 @@ fn check_scene(missing: f64, third: ObjectMotion) {
 #[test]
 fn hopkins_two_motion_sequences() {
     for (name, bound) in [("arm", 0.03), ("1R2RC_g12", 0.02)] {
-        let Some(path) = rank3::datasets::find(&format!("hopkins_dev/{name}.txt")) else {
+        let Some(h) = hopkins(name) else {
             return;
         };
-        let h = rank3::datasets::read_hopkins(&path).unwrap();
         let cfg = SegmentConfig {
             image_area: Some(h.image_size.0 * h.image_size.1),
             ..Default::default()
@@ -157,10 +167,9 @@ fn hopkins_two_motion_sequences() {
 fn partly_dependent_motions_are_counted_by_their_separation() {
     use rand::SeedableRng;
     use rank3::segment::{CountRule, segment};
-    let Some(path) = rank3::datasets::find("hopkins_dev/two_cranes_g12.txt") else {
+    let Some(h) = hopkins("two_cranes_g12") else {
         return;
     };
-    let h = rank3::datasets::read_hopkins(&path).unwrap();
     let run = |split_separation: f64| {
         let cfg = SegmentConfig {
             image_area: Some(h.image_size.0 * h.image_size.1),
@@ -374,10 +383,9 @@ fn random_walks_are_not_another_object() {
 /// tracks, one short of this test's 85 % (seeds 0–4 pass).
 #[test]
 fn hopkins_second_object_is_rejected_as_tracks() {
-    let Some(path) = rank3::datasets::find("hopkins_dev/cars1.txt") else {
+    let Some(h) = hopkins("cars1") else {
         return;
     };
-    let h = rank3::datasets::read_hopkins(&path).unwrap();
     let table = rank3::TrackTable::from_measurements(&h.measurements);
     let config = Config {
         camera: CameraModel::Orthographic,
@@ -488,10 +496,9 @@ fn second_object_over_a_plane_stays_rejected_with_the_automatic_camera() {
 /// rigid group seen.
 #[test]
 fn hopkins_object_within_the_track_floor_is_rejected_as_tracks() {
-    let Some(path) = rank3::datasets::find("hopkins_dev/1R2RC_g23.txt") else {
+    let Some(h) = hopkins("1R2RC_g23") else {
         return;
     };
-    let h = rank3::datasets::read_hopkins(&path).unwrap();
     let table = rank3::TrackTable::from_measurements(&h.measurements);
     for seed in [0, 1] {
         second_object_rejected(

@@ -507,7 +507,7 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
     let floor = 1e-9 * meas.w.norm_max().max(1.0);
     // The fits of the last round, kept for the re-classification once settled.
     let mut reuse: Option<(Vec<Option<EntryFit>>, f64)> = None;
-    let (fits, entry_thr) = loop {
+    let (fits, entry_thr, floor_kept) = loop {
         let (fits, entry_thr) = if let Some(kept) = reuse.take() {
             kept
         } else {
@@ -650,6 +650,8 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
         };
         let mut new_flags = Vec::new();
         let mut new_inl = Vec::new();
+        // Inliers that pass only by `min_track_threshold_px` (`RobustResult::floor_kept`).
+        let mut by_floor = vec![false; n];
         for (p, fit) in fits.iter().enumerate() {
             let Some(fit) = fit else {
                 // Seen in too few of the model's frames to be tested: no evidence against
@@ -671,9 +673,10 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
             } else {
                 (fit.rms, fit.kept)
             };
+            let noise_limit = sigma_e * chi2_ratio[k.min(nf)].sqrt();
             let limit = match config.ransac.threshold_px {
                 Some(t) => t,
-                None => (sigma_e * chi2_ratio[k.min(nf)].sqrt()).max(config.min_track_threshold_px),
+                None => noise_limit.max(config.min_track_threshold_px),
             };
             // A track over the fraction is kept when, once the model has settled, all its
             // flags are clearly gross (none ambiguous), at least 5 entries remain for its χ²
@@ -687,6 +690,7 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                 continue;
             }
             new_inl.push(p);
+            by_floor[p] = config.ransac.threshold_px.is_none() && k >= 2 && rms > noise_limit;
             new_flags.extend(fit.flagged.iter().map(|&f| (f, p)));
         }
         new_flags.sort_unstable();
@@ -733,7 +737,7 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                 reuse = Some((fits, entry_thr));
                 continue;
             }
-            break (fits, entry_thr);
+            break (fits, entry_thr, by_floor);
         }
         rounds += 1;
         // A suspect frame's camera is re-estimated from its entries and the tracks' own
@@ -838,21 +842,7 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
                 _ => 0,
             })
             .collect(),
-        floor_kept: (0..n)
-            .map(|p| match &fits[p] {
-                Some(f) if inlier_tracks[p] && config.ransac.threshold_px.is_none() => {
-                    let (rms, k) = if strict {
-                        f.test_rms()
-                    } else {
-                        (f.rms, f.kept)
-                    };
-                    let nu = (2 * k) as f64 - 3.0;
-                    nu > 0.0
-                        && rms > sigma_e * (chi2_quantile(nu, config.track_probability) / nu).sqrt()
-                }
-                _ => false,
-            })
-            .collect(),
+        floor_kept,
         inlier_tracks,
         flagged_entries: flagged,
         noise_sigma: sigma_e,

@@ -175,6 +175,26 @@ pub struct TrackFit {
     pub kept: usize,
 }
 
+/// Entries a trimmed fit drops from a track seen in `k` frames: `⌊α k⌋` for `α =
+/// trim_fraction`, leaving at least 2 (see the module documentation).
+pub(crate) fn trim_count(trim_fraction: f64, k: usize) -> usize {
+    ((trim_fraction * k as f64).floor() as usize).min(k.saturating_sub(2))
+}
+
+/// The per-coordinate squared residual of a track from the sum `ss` of squared image
+/// distances over the `kept` of its `k` entries a trimmed fit keeps: `ss / (2 kept − 3) /
+/// c_α`, `c_α = 1 + α ln α / (1 − α)` for the dropped fraction `α = (k − kept) / k` (the
+/// module documentation), so that it is `≈ σ²` for an inlier with Gaussian noise.
+pub(crate) fn trimmed_r2(ss: f64, k: usize, kept: usize) -> f64 {
+    let alpha = (k - kept) as f64 / k as f64;
+    let c = if alpha > 0.0 {
+        1.0 + alpha * alpha.ln() / (1.0 - alpha)
+    } else {
+        1.0
+    };
+    ss / (2.0 * kept as f64 - 3.0).max(1.0) / c
+}
+
 /// The track estimator over the columns of a [`Measurements`]; items are track indices.
 #[derive(Debug, Clone)]
 pub struct TrackSubspace {
@@ -479,7 +499,7 @@ impl TrackSubspace {
         }
         let (fr, y) = (&sc.fr, &sc.y);
         let mut s = normal_solve(&model.m, fr, y, 0..k)?;
-        let trim = ((self.cfg.trim_fraction * k as f64).floor() as usize).min(k - 2);
+        let trim = trim_count(self.cfg.trim_fraction, k);
         let kk = k - trim;
         if trim > 0 {
             for _ in 0..2 {
@@ -504,16 +524,9 @@ impl TrackSubspace {
                 frame_dist2(&model.m, fr[i], &y[i], &s)
             })
             .sum();
-        let alpha = trim as f64 / k as f64;
-        let c = if alpha > 0.0 {
-            1.0 + alpha * alpha.ln() / (1.0 - alpha)
-        } else {
-            1.0
-        };
-        let dof = (2.0 * kk as f64 - 3.0).max(1.0);
         Some(TrackFit {
             s,
-            rms: (ss / dof / c).sqrt(),
+            rms: trimmed_r2(ss, k, kk).sqrt(),
             overlap: k,
             kept: kk,
         })

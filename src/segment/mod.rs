@@ -1816,7 +1816,7 @@ pub fn other_objects<R: Rng + ?Sized>(
         Err(Error::TooFew { .. }) | Err(Error::Degenerate(_)) => return Ok(Vec::new()),
         Err(e) => return Err(e),
     };
-    let ln_n = ((2 * meas.n_observed()).max(2) as f64).ln();
+    let ln_n = log_scalars(meas);
     // The largest noise of a rigid group: `max_group_sigma`, or `max_group_sigma_ratio`
     // times the main body's noise when that is larger.
     let max_sigma = cfg
@@ -1870,13 +1870,7 @@ pub fn other_objects<R: Rng + ?Sized>(
             rss_own += nu * own;
             rss_main += nu * ts.track_fit(main, c).map_or(9.0 * own, |m| m.rms * m.rms);
         }
-        let gain = if rss_own > 0.0 && dof > 0.0 {
-            dof * (rss_main / rss_own).ln()
-        } else {
-            0.0
-        };
-        let beta = ln_n * (8.0 * model.n_defined() as f64 - 9.0).max(0.0);
-        if gain > beta {
+        if ObjectEvidence::of(dof, rss_main, rss_own, ln_n, &model).apart() {
             let tracks = tracks.iter().map(|&c| candidates[c]).collect();
             found.push((model, tracks));
         }
@@ -1941,31 +1935,54 @@ pub struct OtherObject {
     pub model: AffineSubspace,
 }
 
-/// The evidence that an [`OtherObject`] moves apart from a projective model fitted to the
-/// main body: `gain = Σ_p ν_p ln(r²_P(p) / r²_own(p))` over the object's tracks, the
-/// likelihood ratio of [`other_objects`] with the projective model in place of the main
-/// body's subspace, against `penalty = (8F_g − 9) ln(2 n_obs)` for the object's own subspace
-/// (BIC). `r_own` is a track's trimmed RMS under the object's subspace
-/// ([`TrackSubspace::track_fit`]) and `r_P` the same under the projective cameras: the
-/// track's point triangulated from its entries, its `⌊α k⌋` farthest entries (`α` the
-/// subspace's `trim_fraction`) dropped and the point triangulated again, `r²_P = Σ_kept
-/// d² / (2k' − 3) / c_α` as for `r_own`.
+/// The evidence that a group of tracks moves apart from another model (the main body's
+/// subspace in [`other_objects`], its projective cameras in [`projective_evidence`]): the
+/// likelihood ratio of the two models for the group's residuals, each with its own noise
+/// level, `gain = N ln(RSS_other / RSS_own)` with `N = Σ_p ν_p` and `RSS = Σ_p ν_p r²_p`,
+/// against Schwarz's penalty for the group's own subspace, `penalty = (8F_g − 9) ln(2 n_obs)`
+/// (BIC; Schwarz 1978).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ProjectiveEvidence {
+pub struct ObjectEvidence {
     pub gain: f64,
     pub penalty: f64,
 }
 
-impl ProjectiveEvidence {
-    /// The object moves apart: its own rigid motion explains its tracks better than the
-    /// projective cameras by more than it costs.
+impl ObjectEvidence {
+    /// From the group's degrees of freedom `dof`, its residual sums under the other model
+    /// and its own subspace `own`, and `ln(2 n_obs)` ([`log_scalars`]); a gain of 0 when
+    /// either sum is empty.
+    fn of(dof: f64, rss_other: f64, rss_own: f64, ln_n: f64, own: &AffineSubspace) -> Self {
+        let gain = if rss_own > 0.0 && dof > 0.0 {
+            dof * (rss_other / rss_own).ln()
+        } else {
+            0.0
+        };
+        ObjectEvidence {
+            gain,
+            penalty: ln_n * (8.0 * own.n_defined() as f64 - 9.0).max(0.0),
+        }
+    }
+
+    /// The group moves apart: its own rigid motion explains its tracks better than the
+    /// other model by more than it costs.
     pub fn apart(&self) -> bool {
         self.gain > self.penalty
     }
 }
 
-/// [`ProjectiveEvidence`] for `object` (found by [`other_objects`] in `meas`) against
-/// `model`, whose cameras are those of `frames` (indices into `meas`' frames, in order).
+/// `ln(2 n_obs)`, the log of the number of observed scalars of `meas` (at least `ln 2`).
+fn log_scalars(meas: &Measurements) -> f64 {
+    ((2 * meas.n_observed()).max(2) as f64).ln()
+}
+
+/// [`ObjectEvidence`] for `object` (found by [`other_objects`] in `meas`) against the
+/// projective `model`, whose cameras are those of `frames` (indices into `meas`' frames, in
+/// order): the likelihood ratio of [`other_objects`] with the projective cameras in place of
+/// the main body's subspace. `r_own` is a track's trimmed RMS under the object's subspace
+/// ([`TrackSubspace::track_fit`]) and `r_P` the same under the cameras: the track's point
+/// triangulated from its entries, its `⌊α k⌋` farthest entries (`α` the subspace's
+/// `trim_fraction`) dropped and the point triangulated again, `r²_P = Σ_kept d² / (2k' − 3)
+/// / c_α` as for `r_own`.
 ///
 /// Why it is needed: a projective camera has 11 degrees of freedom per frame; fitted to a
 /// nearly planar background, 3 of them are fixed by nothing, and when a verdict readmits the
@@ -1983,7 +2000,7 @@ pub fn projective_evidence(
     frames: &[usize],
     model: &crate::projective::ProjectiveModel,
     cfg: &SubspaceConfig,
-) -> ProjectiveEvidence {
+) -> ObjectEvidence {
     let own = TrackSubspace::new(&meas.select_tracks(&object.tracks), cfg);
     let sub = meas.select(frames, &object.tracks);
     let (nf, n) = (sub.n_frames(), sub.n_points());
@@ -2003,7 +2020,7 @@ pub fn projective_evidence(
             .map(|f| (dist(x, f, p), f))
             .collect();
         let k = d.len();
-        let trim = ((cfg.trim_fraction * k as f64).floor() as usize).min(k.saturating_sub(2));
+        let trim = crate::robust::subspace::trim_count(cfg.trim_fraction, k);
         d.sort_by(|a, b| b.0.total_cmp(&a.0));
         d[..trim]
             .iter()
@@ -2011,7 +2028,7 @@ pub fn projective_evidence(
     }
     let kept = Measurements::new(sub.w.clone(), visible);
     let points = model.triangulate(&kept);
-    let (mut gain, mut rss_own, mut rss_proj, mut dof) = (0.0, 0.0, 0.0, 0.0);
+    let (mut rss_own, mut rss_proj, mut dof) = (0.0, 0.0, 0.0);
     for (i, x) in points.iter().enumerate() {
         let Some(o) = own.track_fit(&object.model, i) else {
             continue;
@@ -2021,17 +2038,11 @@ pub fn projective_evidence(
         if kk < 2 {
             continue;
         }
-        let alpha = (k - kk) as f64 / k as f64;
-        let c = if alpha > 0.0 {
-            1.0 + alpha * alpha.ln() / (1.0 - alpha)
-        } else {
-            1.0
-        };
         let ss: f64 = (0..nf)
             .filter(|&f| kept.is_visible(f, i))
             .map(|f| dist(x, f, i).powi(2))
             .sum();
-        let r2_proj = ss / (2.0 * kk as f64 - 3.0).max(1.0) / c;
+        let r2_proj = crate::robust::subspace::trimmed_r2(ss, k, kk);
         let r2_own = (o.rms * o.rms).max(1e-24);
         let nu = fit_dof(&o);
         dof += nu;
@@ -2045,12 +2056,5 @@ pub fn projective_evidence(
                 9.0 * r2_own
             };
     }
-    if rss_own > 0.0 && dof > 0.0 {
-        gain = dof * (rss_proj / rss_own).ln();
-    }
-    let ln_n = ((2 * meas.n_observed()).max(2) as f64).ln();
-    ProjectiveEvidence {
-        gain,
-        penalty: ln_n * (8.0 * object.model.n_defined() as f64 - 9.0).max(0.0),
-    }
+    ObjectEvidence::of(dof, rss_proj, rss_own, log_scalars(meas), &object.model)
 }
