@@ -138,13 +138,19 @@ pub struct Check {
 /// that decided it.
 pub fn check(table: &TrackTable) -> Result<Check> {
     let (nf, nt) = (table.n_frames(), table.n_tracks());
-    // Centroid (relative to the first observation, so that huge coordinates lose nothing
-    // to the sum), largest magnitude, finiteness.
-    let mut reference: Option<[f64; 2]> = None;
-    let (mut sum, mut count, mut max_abs) = ([0.0f64; 2], 0usize, 0.0f64);
-    for f in 0..nf {
-        for e in table.frame_row(f).entries() {
-            if !(e.x.is_finite() && e.y.is_finite()) {
+    // One pass over the observations, both cores: the centroid (relative to the first
+    // observation, so that huge coordinates lose nothing to the sum), the largest
+    // magnitude, finiteness, and per track the frames seen, the mean position and the sum
+    // of squared distances from it.
+    let stats = track_stats(table);
+    if !stats.finite {
+        for f in 0..nf {
+            if let Some(e) = table
+                .frame_row(f)
+                .entries()
+                .iter()
+                .find(|e| !(e.x.is_finite() && e.y.is_finite()))
+            {
                 return Err(Error::Degenerate(format!(
                     "the observation of track {} in frame {} is not finite ({}, {})",
                     table.track_ids()[e.track as usize],
@@ -153,14 +159,9 @@ pub fn check(table: &TrackTable) -> Result<Check> {
                     e.y
                 )));
             }
-            let r = *reference.get_or_insert([e.x, e.y]);
-            sum[0] += e.x - r[0];
-            sum[1] += e.y - r[1];
-            count += 1;
-            max_abs = max_abs.max(e.x.abs()).max(e.y.abs());
         }
     }
-    let Some(r) = reference else {
+    let Some(r) = stats.reference else {
         return Ok(Check {
             origin: [0.0, 0.0],
             median_motion_px: 0.0,
@@ -170,33 +171,18 @@ pub fn check(table: &TrackTable) -> Result<Check> {
             warnings: Vec::new(),
         });
     };
-    let origin = [r[0] + sum[0] / count as f64, r[1] + sum[1] / count as f64];
-    // Per track: frames seen, mean position and RMS distance from it.
-    let mut k = vec![0usize; nt];
-    let mut mean = vec![[0.0f64; 2]; nt];
-    for f in 0..nf {
-        for e in table.frame_row(f).entries() {
-            let p = e.track as usize;
-            k[p] += 1;
-            mean[p][0] += e.x - origin[0];
-            mean[p][1] += e.y - origin[1];
-        }
-    }
+    let max_abs = stats.max_abs;
+    let (k, ss) = (stats.count, stats.m2);
+    // Σ_p k_p (mean_p − r) / Σ_p k_p.
+    let (mut sum, mut count) = ([0.0f64; 2], 0usize);
     for p in 0..nt {
         if k[p] > 0 {
-            mean[p][0] /= k[p] as f64;
-            mean[p][1] /= k[p] as f64;
+            sum[0] += k[p] as f64 * (stats.mean[p][0] - r[0]);
+            sum[1] += k[p] as f64 * (stats.mean[p][1] - r[1]);
+            count += k[p];
         }
     }
-    let mut ss = vec![0.0f64; nt];
-    for f in 0..nf {
-        for e in table.frame_row(f).entries() {
-            let p = e.track as usize;
-            let dx = e.x - origin[0] - mean[p][0];
-            let dy = e.y - origin[1] - mean[p][1];
-            ss[p] += dx * dx + dy * dy;
-        }
-    }
+    let origin = [r[0] + sum[0] / count as f64, r[1] + sum[1] / count as f64];
     let moving: Vec<usize> = (0..nt).filter(|&p| k[p] >= 2).collect();
     let motion: Vec<f64> = moving
         .iter()
@@ -499,6 +485,12 @@ struct Block {
 /// observations, at least [`MIN_BLOCK_FRAMES`] × [`MIN_BLOCK_TRACKS`].
 fn reference_block(table: &TrackTable) -> Option<Block> {
     let a = consecutive_block(table);
+    // No block holds more observations than the table: a complete table's whole block.
+    if a.as_ref()
+        .is_some_and(|a| a.frames.len() * a.tracks.len() == table.n_observed())
+    {
+        return a;
+    }
     let b = greedy_block(table);
     let size = |b: &Option<Block>| b.as_ref().map_or(0, |b| b.frames.len() * b.tracks.len());
     if size(&b) > size(&a) { b } else { a }
@@ -615,6 +607,118 @@ fn greedy_block(table: &TrackTable) -> Option<Block> {
             .filter(|&p| common[p / 64] >> (p % 64) & 1 == 1)
             .collect(),
     })
+}
+
+/// Per-track statistics of [`check`]'s pass over the observations.
+struct TrackStats {
+    /// The first observation (frame order), `None` for an empty table.
+    reference: Option<[f64; 2]>,
+    max_abs: f64,
+    finite: bool,
+    /// Frames seen, mean position and `Σ |w − mean|²` per track.
+    count: Vec<usize>,
+    mean: Vec<[f64; 2]>,
+    m2: Vec<f64>,
+}
+
+/// [`TrackStats`] in one pass over the observations, in chunks of frames on all cores:
+/// each chunk sums per track relative to the track's first observation in it (so that the
+/// sums cancel nothing when the coordinates are far from the origin), and the chunks are
+/// merged by Chan, Golub & LeVeque's pairwise update of the mean and the sum of squares
+/// ("Algorithms for computing the sample variance", Am. Stat. 37(3), 1983). `O(observations
+/// + N · chunks)`.
+fn track_stats(table: &TrackTable) -> TrackStats {
+    use rayon::prelude::*;
+    let (nf, nt) = (table.n_frames(), table.n_tracks());
+    struct Chunk {
+        reference: Option<[f64; 2]>,
+        max_abs: f64,
+        finite: bool,
+        count: Vec<usize>,
+        mean: Vec<[f64; 2]>,
+        m2: Vec<f64>,
+    }
+    let chunk_of = |frames: std::ops::Range<usize>| -> Chunk {
+        let mut c = Chunk {
+            reference: None,
+            max_abs: 0.0,
+            finite: true,
+            count: vec![0; nt],
+            // The shift (first observation) until the end, then the mean.
+            mean: vec![[0.0; 2]; nt],
+            m2: vec![0.0; nt],
+        };
+        let mut s1 = vec![[0.0f64; 2]; nt];
+        for f in frames {
+            for e in table.frame_row(f).entries() {
+                if !(e.x.is_finite() && e.y.is_finite()) {
+                    c.finite = false;
+                    continue;
+                }
+                let p = e.track as usize;
+                if c.count[p] == 0 {
+                    c.mean[p] = [e.x, e.y];
+                }
+                c.reference.get_or_insert([e.x, e.y]);
+                c.count[p] += 1;
+                let (dx, dy) = (e.x - c.mean[p][0], e.y - c.mean[p][1]);
+                s1[p][0] += dx;
+                s1[p][1] += dy;
+                c.m2[p] += dx * dx + dy * dy;
+                c.max_abs = c.max_abs.max(e.x.abs()).max(e.y.abs());
+            }
+        }
+        for p in 0..nt {
+            if c.count[p] > 0 {
+                let n = c.count[p] as f64;
+                let (mx, my) = (s1[p][0] / n, s1[p][1] / n);
+                c.mean[p][0] += mx;
+                c.mean[p][1] += my;
+                c.m2[p] = (c.m2[p] - n * (mx * mx + my * my)).max(0.0);
+            }
+        }
+        c
+    };
+    let threads = rayon::current_num_threads().max(1);
+    let per = nf.div_ceil(threads).max(1);
+    let chunks: Vec<Chunk> = (0..nf.div_ceil(per))
+        .into_par_iter()
+        .map(|i| chunk_of(i * per..((i + 1) * per).min(nf)))
+        .collect();
+    let mut it = chunks.into_iter();
+    let mut acc = it.next().unwrap_or_else(|| chunk_of(0..0));
+    for b in it {
+        acc.reference = acc.reference.or(b.reference);
+        acc.max_abs = acc.max_abs.max(b.max_abs);
+        acc.finite &= b.finite;
+        for p in 0..nt {
+            let (na, nb) = (acc.count[p], b.count[p]);
+            if nb == 0 {
+                continue;
+            }
+            if na == 0 {
+                acc.count[p] = nb;
+                acc.mean[p] = b.mean[p];
+                acc.m2[p] = b.m2[p];
+                continue;
+            }
+            let n = (na + nb) as f64;
+            let (fa, fb) = (na as f64, nb as f64);
+            let d = [b.mean[p][0] - acc.mean[p][0], b.mean[p][1] - acc.mean[p][1]];
+            acc.mean[p][0] += d[0] * fb / n;
+            acc.mean[p][1] += d[1] * fb / n;
+            acc.m2[p] += b.m2[p] + (d[0] * d[0] + d[1] * d[1]) * fa * fb / n;
+            acc.count[p] = na + nb;
+        }
+    }
+    TrackStats {
+        reference: acc.reference,
+        max_abs: acc.max_abs,
+        finite: acc.finite,
+        count: acc.count,
+        mean: acc.mean,
+        m2: acc.m2,
+    }
 }
 
 /// At most `max` indices of `0..len`, evenly spaced, first and last included.

@@ -1185,20 +1185,25 @@ impl Reconstruction {
         //    camera (2×4) needs 4 points per frame when it is estimated jointly with the
         //    translation (missing data); centering needs only 3.
         let min_points = min_points_per_frame(config, table.is_complete());
-        let (mut kept_table, set_aside, frames, tracks) = timer.run("set-aside", |_| {
-            table.set_aside(config.min_frames_per_track, min_points)
+        let (kept_cow, set_aside, frames, tracks) = timer.run("set-aside", |_| {
+            table.set_aside_cow(config.min_frames_per_track, min_points)
         });
-        check_size(&kept_table)?;
+        check_size(&kept_cow)?;
         // Degenerate input is named before the robust pass; the image origin is moved to the
-        // centroid of the observations, and the results are moved back at the end.
-        let check = degeneracy::check(&kept_table)?;
+        // centroid of the observations (x also divided by the aspect ratio), and the results
+        // are moved back at the end. The kept table is copied once, moved as it is copied.
+        let check = degeneracy::check(&kept_cow)?;
         warnings.extend(check.warnings);
         let origin = check.origin;
-        kept_table.translate([-origin[0], -origin[1]]);
         let aspect = config.aspect_ratio.unwrap_or(1.0);
-        if aspect != 1.0 {
-            kept_table.scale([1.0 / aspect, 1.0]);
-        }
+        let (shift, scale) = ([-origin[0], -origin[1]], [1.0 / aspect, 1.0]);
+        let kept_table = match kept_cow {
+            std::borrow::Cow::Borrowed(t) => t.transformed(shift, scale),
+            std::borrow::Cow::Owned(mut t) => {
+                t.transform(shift, scale);
+                t
+            }
+        };
         let (centred_config, pp_from_image_size) = centred_config(config, origin, aspect);
         let config = centred_config.as_ref().unwrap_or(config);
         let kept = Kept {
@@ -1215,10 +1220,10 @@ impl Reconstruction {
             return Ok(rec);
         }
         // 2. Robust pass (affine): outlier tracks, gross entries, other rigid objects.
-        let mut selection = robust_stage(&kept, config, &mut timer, &mut warnings)?;
+        let (mut selection, table_meas) = robust_stage(&kept, config, &mut timer, &mut warnings)?;
         // 3. Fit of the selected tracks: affine factorization, metric upgrade, refinement,
         //    and the projective stages for the projective and perspective cameras.
-        let mut fitted = fit_selection(&kept, &selection, config, None, &mut timer)?;
+        let mut fitted = fit_selection(&kept, &selection, config, None, table_meas, &mut timer)?;
         // 4. The projective model judges the tracks again (not when the automatic choice's
         //    pre-test on a subset already kept the scaled orthographic camera).
         if config.camera.is_projective() && fitted.projective.is_some() {
@@ -1381,13 +1386,14 @@ struct Selection {
 /// rejected whole. Without a
 /// rigid majority the affine cameras stop ([`Error::NoRigidMajority`]); the projective ones
 /// go on with every track, for the projective verdict to judge. Cost: the robust pass's
-/// (see [`crate::robust`]).
+/// (see [`crate::robust`]). Also returns the kept table's dense measurements, which the
+/// pass builds, for the fit to reuse when it keeps the whole table.
 fn robust_stage(
     kept: &Kept<'_>,
     config: &Config,
     timer: &mut Timer<'_>,
     warnings: &mut Vec<String>,
-) -> Result<Selection> {
+) -> Result<(Selection, Option<Measurements>)> {
     let n = kept.table.n_tracks();
     let mut sel = Selection {
         inlier: vec![true; n],
@@ -1396,7 +1402,7 @@ fn robust_stage(
         report: None,
     };
     let Some(rc) = &config.robust else {
-        return Ok(sel);
+        return Ok((sel, None));
     };
     let meas_all = kept.table.measurements();
     let mut rng = rand::rngs::StdRng::seed_from_u64(config.seed);
@@ -1420,7 +1426,7 @@ fn robust_stage(
     let r = match r {
         Err(e @ Error::TooFew { .. }) => {
             skipped(e.to_string(), warnings);
-            return Ok(sel);
+            return Ok((sel, Some(meas_all)));
         }
         r => r?,
     };
@@ -1440,7 +1446,7 @@ fn robust_stage(
                 .into(),
             warnings,
         );
-        return Ok(sel);
+        return Ok((sel, Some(meas_all)));
     }
     if let robust::Verdict::NoRigidMajority {
         reason,
@@ -1606,7 +1612,7 @@ fn robust_stage(
         &sel.flagged,
     );
     sel.report = Some(report);
-    Ok(sel)
+    Ok((sel, Some(meas_all)))
 }
 
 /// Stage 4, the projective verdict: the projective model judges every kept track again
@@ -1678,7 +1684,7 @@ fn projective_verdict_stage(
             .projective
             .as_ref()
             .map(|pf| (pf, &fitted.used_frames[..]));
-        fitted = fit_selection(kept, sel, config, previous, timer)?;
+        fitted = fit_selection(kept, sel, config, previous, None, timer)?;
         refits += 1;
     }
     let inlier = &sel.inlier;
@@ -2092,11 +2098,15 @@ struct Fitted {
 /// the previous projective fit: when the frames are the same, its cameras (with the
 /// selection's points triangulated) start the projective bundle adjustment
 /// ([`projective::refine`]), instead of the affine start and the pOSE bridge.
+/// `table_meas`, the kept table's measurements when the caller has them, are the fit's when
+/// the selection keeps every track and entry and nothing is set aside (no copy is made);
+/// otherwise they are dropped before the fit's are built.
 fn fit_selection(
     kept: &Kept<'_>,
     selection: &Selection,
     config: &Config,
     previous: Option<(&projective::ProjectiveFit, &[usize])>,
+    table_meas: Option<Measurements>,
     timer: &mut Timer<'_>,
 ) -> Result<Fitted> {
     let (kept_frames, kept_tracks) = (&kept.frames, &kept.tracks);
@@ -2107,20 +2117,31 @@ fn fit_selection(
     // The table the fit uses: inlier tracks, flagged entries hidden, set aside again
     // (hiding entries can starve a track or a frame).
     let inlier_idx: Vec<usize> = (0..kept.n_tracks()).filter(|&p| inlier[p]).collect();
-    let all_frames: Vec<usize> = (0..kept.n_frames()).collect();
-    let mut fit_table = kept.select(&all_frames, &inlier_idx);
-    let mut pos = vec![usize::MAX; kept.n_tracks()];
-    for (k, &p) in inlier_idx.iter().enumerate() {
-        pos[p] = k;
-    }
-    for &(f, p) in flagged {
-        if pos[p] != usize::MAX {
-            fit_table.unset(f, pos[p]);
+    // (Every track and entry kept: the kept table itself, borrowed.)
+    let fit_table = if inlier_idx.len() == kept.n_tracks() && flagged.is_empty() {
+        std::borrow::Cow::Borrowed(kept)
+    } else {
+        let all_frames: Vec<usize> = (0..kept.n_frames()).collect();
+        let mut fit_table = kept.select(&all_frames, &inlier_idx);
+        let mut pos = vec![usize::MAX; kept.n_tracks()];
+        for (k, &p) in inlier_idx.iter().enumerate() {
+            pos[p] = k;
         }
-    }
+        for &(f, p) in flagged {
+            if pos[p] != usize::MAX {
+                fit_table.unset(f, pos[p]);
+            }
+        }
+        std::borrow::Cow::Owned(fit_table)
+    };
     let min_points = min_points_per_frame(config, fit_table.is_complete());
-    let (fit, set_aside, fit_frames, fit_tracks) =
-        fit_table.into_set_aside(config.min_frames_per_track, min_points);
+    let (fit, set_aside, fit_frames, fit_tracks) = match fit_table {
+        std::borrow::Cow::Borrowed(t) => t.set_aside_cow(config.min_frames_per_track, min_points),
+        std::borrow::Cow::Owned(t) => {
+            let (t, out, f, p) = t.into_set_aside(config.min_frames_per_track, min_points);
+            (std::borrow::Cow::Owned(t), out, f, p)
+        }
+    };
     check_size(&fit)?;
     let used_frames: Vec<usize> = fit_frames.iter().map(|&f| kept_frames[f]).collect();
     let used_tracks: Vec<usize> = fit_tracks
@@ -2128,7 +2149,13 @@ fn fit_selection(
         .map(|&k| kept_tracks[inlier_idx[k]])
         .collect();
     let outlier_kept: Vec<usize> = (0..kept.n_tracks()).filter(|&p| !inlier[p]).collect();
-    let meas = fit.measurements();
+    let meas = match table_meas {
+        Some(m) if matches!(fit, std::borrow::Cow::Borrowed(_)) => m,
+        other => {
+            drop(other);
+            fit.measurements()
+        }
+    };
     // From here on the fit's observations are in `meas`; the table keeps its ids only (the
     // observations are freed now, not at the end of the function).
     let ids_only = TrackTable::new(fit.frame_ids().to_vec(), fit.track_ids().to_vec());

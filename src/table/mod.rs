@@ -538,36 +538,51 @@ impl TrackTable {
     /// The numeric 2F×N observation matrix and mask the dense solvers use (`O(F·N)`
     /// memory; the pipeline checks [`TrackTable::dense_bytes`] against the budget first).
     pub fn measurements(&self) -> Measurements {
+        use rayon::prelude::*;
         let (f, n) = (self.n_frames(), self.n_tracks());
         let mut w = faer::Mat::zeros(2 * f, n);
         let mut visible = vec![false; f * n];
+        if n == 0 {
+            return Measurements::new(w, visible);
+        }
         // Written in tiles of FRAMES frames × TRACKS tracks (a cursor per row, whose entries
         // are in track order), so that consecutive writes to the column-major W land in the
         // same columns instead of 16·F bytes apart. (An entry out of track order is written
-        // in a later tile: any order is written whole.)
+        // in a later tile: any order is written whole.) The blocks of FRAMES frames (rows
+        // of W, and of the mask) are filled on all cores.
         const FRAMES: usize = 32;
         const TRACKS: usize = 256;
+        let mut blocks = Vec::with_capacity(f.div_ceil(FRAMES));
+        let mut rest = w.as_mut();
         for f0 in (0..f).step_by(FRAMES) {
-            let rows = &self.rows[f0..(f0 + FRAMES).min(f)];
-            let mut cursor = vec![0usize; rows.len()];
-            for t0 in (0..n.max(1)).step_by(TRACKS) {
-                let end = if t0 + TRACKS >= n {
-                    usize::MAX
-                } else {
-                    t0 + TRACKS
-                };
-                for (k, row) in rows.iter().enumerate() {
-                    let fi = f0 + k;
-                    while let Some(e) = row.get(cursor[k]).filter(|e| (e.track as usize) < end) {
-                        let p = e.track as usize;
-                        w[(2 * fi, p)] = e.x;
-                        w[(2 * fi + 1, p)] = e.y;
-                        visible[fi * n + p] = true;
-                        cursor[k] += 1;
+            let (top, bottom) = rest.split_at_row_mut(2 * FRAMES.min(f - f0));
+            blocks.push((f0, top));
+            rest = bottom;
+        }
+        blocks
+            .into_par_iter()
+            .zip(visible.par_chunks_mut(FRAMES * n))
+            .for_each(|((f0, mut wb), vis)| {
+                let rows = &self.rows[f0..(f0 + FRAMES).min(f)];
+                let mut cursor = vec![0usize; rows.len()];
+                for t0 in (0..n).step_by(TRACKS) {
+                    let end = if t0 + TRACKS >= n {
+                        usize::MAX
+                    } else {
+                        t0 + TRACKS
+                    };
+                    for (k, row) in rows.iter().enumerate() {
+                        while let Some(e) = row.get(cursor[k]).filter(|e| (e.track as usize) < end)
+                        {
+                            let p = e.track as usize;
+                            wb[(2 * k, p)] = e.x;
+                            wb[(2 * k + 1, p)] = e.y;
+                            vis[k * n + p] = true;
+                            cursor[k] += 1;
+                        }
                     }
                 }
-            }
-        }
+            });
         Measurements::new(w, visible)
     }
 
@@ -620,6 +635,28 @@ impl TrackTable {
     ) -> (TrackTable, Vec<SetAside>, Vec<usize>, Vec<usize>) {
         let (out, frames, tracks) = self.set_aside_plan(min_frames_per_track, min_points_per_frame);
         (self.select(&frames, &tracks), out, frames, tracks)
+    }
+
+    /// [`Self::set_aside`] without the copy when nothing is set aside (the table itself,
+    /// borrowed).
+    pub fn set_aside_cow(
+        &self,
+        min_frames_per_track: usize,
+        min_points_per_frame: usize,
+    ) -> (
+        std::borrow::Cow<'_, TrackTable>,
+        Vec<SetAside>,
+        Vec<usize>,
+        Vec<usize>,
+    ) {
+        use std::borrow::Cow;
+        let (out, frames, tracks) = self.set_aside_plan(min_frames_per_track, min_points_per_frame);
+        let kept = if frames.len() == self.n_frames() && tracks.len() == self.n_tracks() {
+            Cow::Borrowed(self)
+        } else {
+            Cow::Owned(self.select(&frames, &tracks))
+        };
+        (kept, out, frames, tracks)
     }
 
     /// [`Self::set_aside`] of a table that is no longer needed: when nothing is set aside it
@@ -961,19 +998,52 @@ impl TrackTable {
         comps
     }
 
-    /// Adds `d` to every observation's coordinates. `O(observations)`.
+    /// Adds `d` to every observation's coordinates. `O(observations)`, on all cores.
     pub fn translate(&mut self, d: [f64; 2]) {
-        for e in self.rows.iter_mut().flatten() {
-            e.x += d[0];
-            e.y += d[1];
-        }
+        self.transform(d, [1.0, 1.0]);
     }
 
-    /// Multiplies every observation's x by `k[0]` and y by `k[1]`. `O(observations)`.
+    /// Multiplies every observation's x by `k[0]` and y by `k[1]`. `O(observations)`, on
+    /// all cores.
     pub fn scale(&mut self, k: [f64; 2]) {
-        for e in self.rows.iter_mut().flatten() {
-            e.x *= k[0];
-            e.y *= k[1];
+        self.transform([0.0, 0.0], k);
+    }
+
+    /// Every observation `w` replaced by `(w + d) ∘ k` (componentwise), as
+    /// [`Self::translate`] then [`Self::scale`] in one pass. `O(observations)`, on all
+    /// cores.
+    pub fn transform(&mut self, d: [f64; 2], k: [f64; 2]) {
+        use rayon::prelude::*;
+        self.rows.par_iter_mut().with_min_len(16).for_each(|row| {
+            for e in row {
+                e.x = (e.x + d[0]) * k[0];
+                e.y = (e.y + d[1]) * k[1];
+            }
+        });
+    }
+
+    /// A copy with every observation `w` replaced by `(w + d) ∘ k`: [`Self::transform`] of
+    /// a clone, in one pass. `O(observations)`, on all cores.
+    pub fn transformed(&self, d: [f64; 2], k: [f64; 2]) -> TrackTable {
+        use rayon::prelude::*;
+        let rows = self
+            .rows
+            .par_iter()
+            .with_min_len(16)
+            .map(|row| {
+                row.iter()
+                    .map(|e| Entry {
+                        track: e.track,
+                        x: (e.x + d[0]) * k[0],
+                        y: (e.y + d[1]) * k[1],
+                    })
+                    .collect()
+            })
+            .collect();
+        TrackTable {
+            frame_ids: self.frame_ids.clone(),
+            track_ids: self.track_ids.clone(),
+            rows,
         }
     }
 
