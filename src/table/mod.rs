@@ -301,8 +301,8 @@ impl TrackTable {
     }
 
     /// A table from observations `(frame, track, x, y)` (indices into the id lists), in
-    /// any order. Sorts them by frame and track: `O(n log n)` time, memory of the
-    /// observations. A pair given twice is returned as a [`DuplicatePair`] (with the ids
+    /// any order. Sorts them by frame and track: `O(n log n)` time (`O(n)`, on all cores,
+    /// when they are already in that order), memory of the observations. A pair given twice is returned as a [`DuplicatePair`] (with the ids
     /// handed back for the message).
     ///
     /// # Panics
@@ -317,6 +317,37 @@ impl TrackTable {
                 .all(|o| (o.0 as usize) < frame_ids.len() && (o.1 as usize) < track_ids.len()),
             "observation index out of range"
         );
+        let mut counts = vec![0usize; frame_ids.len()];
+        obs.iter().for_each(|o| counts[o.0 as usize] += 1);
+        // Already in (frame, track) order, each pair once (a frame-major file, as rank3
+        // writes them): the rows are runs of `obs`, copied on all cores.
+        if obs.windows(2).all(|w| (w[0].0, w[0].1) < (w[1].0, w[1].1)) {
+            use rayon::prelude::*;
+            let mut starts = Vec::with_capacity(counts.len() + 1);
+            starts.push(0);
+            for &c in &counts {
+                starts.push(starts.last().copied().unwrap_or(0) + c);
+            }
+            let rows = (0..frame_ids.len())
+                .into_par_iter()
+                .with_min_len(16)
+                .map(|f| {
+                    obs[starts[f]..starts[f + 1]]
+                        .iter()
+                        .map(|o| Entry {
+                            track: o.1,
+                            x: o.2,
+                            y: o.3,
+                        })
+                        .collect()
+                })
+                .collect();
+            return Ok(Self {
+                frame_ids,
+                track_ids,
+                rows,
+            });
+        }
         let mut order: Vec<u32> = (0..obs.len() as u32).collect();
         rayon::slice::ParallelSliceMut::par_sort_unstable_by_key(order.as_mut_slice(), |&i| {
             let o = &obs[i as usize];
@@ -333,8 +364,6 @@ impl TrackTable {
                 }));
             }
         }
-        let mut counts = vec![0usize; frame_ids.len()];
-        obs.iter().for_each(|o| counts[o.0 as usize] += 1);
         let mut rows: Vec<Vec<Entry>> = counts.iter().map(|&c| Vec::with_capacity(c)).collect();
         for &i in &order {
             let o = &obs[i as usize];
