@@ -487,7 +487,11 @@ pub fn robust_filter_observed<R: Rng + ?Sized>(
     // before the refit) and `als_excluded` (set aside by the refit's reweighting); sorted.
     let mut fit_flags: Vec<(usize, usize)> = Vec::new();
     let (mut model, mut als_excluded) = est
-        .refit_warm_reporting(&ransac_model, &inl, config.subspace.final_als_iterations)
+        .refit_warm_reporting(
+            &ransac_model,
+            &est.refit_tracks(&inl, config.subspace.max_refit_tracks),
+            config.subspace.final_als_iterations,
+        )
         .unwrap_or((ransac_model, Vec::new()));
     let mut flagged: Vec<(usize, usize)>;
     let mut cur = est.clone();

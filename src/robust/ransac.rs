@@ -65,12 +65,25 @@
 //! from the final inliers and, if `τ` moved, the final model is re-scored (and refitted
 //! once) with the new threshold.
 //!
+//! # Many items
+//!
+//! With more than `max_scored_items` items (`M`), the run above is made on `M` items drawn
+//! at random — hypotheses still come from samples of all items, but are scored, compared
+//! and locally optimized on the `M` — and its final model is then scored on every item,
+//! which gives the inliers, residuals and cost returned. The hypotheses' ranking needs
+//! only estimates of their mean cost and inlier ratio, which `M` random items give to a
+//! standard error of `≤ 0.5/√M` of their range (the principle of preemptive RANSAC,
+//! Nistér, "Preemptive RANSAC for live structure and motion estimation", ICCV 2003, and of
+//! the bail-out test above, applied to every hypothesis); the cost then no longer grows
+//! with the number of items but for the one final scoring.
+//!
 //! # Complexity
 //!
-//! `O(iterations · (fit + j̄ · residual))` with `j̄ ≤ n` the mean number of items scored
-//! before bail-out (≈ 32–64 for hopeless hypotheses; `n` without bail-out), the scale
-//! bootstrap's the same with `min(n, scale_subset)` in place of `n`, plus
-//! `O(#improvements · lo_iterations · (refit(min(inliers, lo_max_inliers)) + n · residual))`
+//! `O(iterations · (fit + j̄ · residual) + n · residual)` with `j̄ ≤ min(n, M)` the mean
+//! number of items scored before bail-out (≈ 32–64 for hopeless hypotheses; `min(n, M)`
+//! without bail-out), the scale bootstrap's the same with `min(n, scale_subset)` in place
+//! of `n`, plus `O(#improvements · lo_iterations · (refit(min(inliers, lo_max_inliers)) +
+//! min(n, M) · residual))`
 //! (the full scoring through
 //! [`Estimator::residuals`], which an estimator may parallelize).
 
@@ -193,6 +206,17 @@ pub struct RansacConfig {
     /// ratio. `None` scores every hypothesis fully (up to the exact bound). Default
     /// `Some(3.09)` (one-sided 0.001 per test).
     pub bail_out_z: Option<f64>,
+    /// With more items than this, the hypotheses are scored (and locally optimized) on
+    /// this many items drawn at random, and only the final model on all of them (see the
+    /// module documentation, *Many items*). 0 = always all items. Default 4096: an inlier
+    /// ratio or a mean cost from 4096 random items has a standard error under 0.8 % of
+    /// its range, and the sample-based model is then judged on every item.
+    #[serde(default = "default_max_scored_items")]
+    pub max_scored_items: usize,
+}
+
+fn default_max_scored_items() -> usize {
+    4096
 }
 
 impl Default for RansacConfig {
@@ -212,6 +236,7 @@ impl Default for RansacConfig {
             scale_min_inlier_ratio: 0.4,
             scale_subset: 400,
             bail_out_z: Some(3.09),
+            max_scored_items: default_max_scored_items(),
         }
     }
 }
@@ -616,6 +641,98 @@ fn local_optimize<E: Estimator>(
     best
 }
 
+/// The items `items` of `est` (indices into them are this estimator's items); samples are
+/// still drawn from all `n_all` items of `est`, whose item numbers the samples and fits
+/// keep.
+struct Subset<'a, E> {
+    est: &'a E,
+    items: &'a [usize],
+    n_all: usize,
+}
+
+impl<E: Estimator> Estimator for Subset<'_, E> {
+    type Model = E::Model;
+    fn min_sample_size(&self) -> usize {
+        self.est.min_sample_size()
+    }
+    fn fit(&self, sample: &[usize]) -> Option<E::Model> {
+        self.est.fit(sample)
+    }
+    fn residual(&self, model: &E::Model, item: usize) -> Option<f64> {
+        self.est.residual(model, self.items[item])
+    }
+    fn residuals(&self, model: &E::Model, n: usize) -> Vec<Option<f64>> {
+        self.est.residuals_of(model, &self.items[..n])
+    }
+    fn residuals_of(&self, model: &E::Model, items: &[usize]) -> Vec<Option<f64>> {
+        let mapped: Vec<usize> = items.iter().map(|&j| self.items[j]).collect();
+        self.est.residuals_of(model, &mapped)
+    }
+    fn refit(&self, model: &E::Model, inliers: &[usize]) -> Option<E::Model> {
+        let mut mapped: Vec<usize> = inliers.iter().map(|&j| self.items[j]).collect();
+        mapped.sort_unstable();
+        self.est.refit(model, &mapped)
+    }
+    fn sample<R: Rng + ?Sized>(&self, _n_items: usize, rng: &mut R, out: &mut Vec<usize>) -> bool {
+        self.est.sample(self.n_all, rng, out)
+    }
+    fn sigma_from_residuals(&self, inlier_residuals: &[f64]) -> f64 {
+        self.est.sigma_from_residuals(inlier_residuals)
+    }
+    fn threshold_multiple(&self, p: f64) -> f64 {
+        self.est.threshold_multiple(p)
+    }
+}
+
+/// [`ransac_observed`] with more than `max_scored_items` items: the run on that many
+/// items drawn at random (module documentation, *Many items*), its model then scored on
+/// all `n` items. `O(n)` beyond the subset's run.
+fn ransac_on_subset<E: Estimator, R: Rng + ?Sized>(
+    est: &E,
+    n: usize,
+    config: &RansacConfig,
+    rng: &mut R,
+    observer: &mut dyn Observer,
+    run: usize,
+) -> Result<RansacResult<E::Model>> {
+    let m = config.max_scored_items;
+    // The first m of a random permutation (partial Fisher–Yates), in item order.
+    let mut order: Vec<usize> = (0..n).collect();
+    for i in 0..m {
+        order.swap(i, rng.random_range(i..n));
+    }
+    order.truncate(m);
+    order.sort_unstable();
+    let sub = Subset {
+        est,
+        items: &order,
+        n_all: n,
+    };
+    let r = ransac_all(&sub, m, config, rng, observer, run)?;
+    let Some(model) = r.model else {
+        return Ok(RansacResult {
+            model: None,
+            inliers: vec![false; n],
+            residuals: vec![None; n],
+            ..r
+        });
+    };
+    let best = score(est, model, n, r.threshold);
+    let inliers: Vec<bool> = best
+        .residuals
+        .iter()
+        .map(|x| matches!(x, Some(x) if *x <= r.threshold))
+        .collect();
+    Ok(RansacResult {
+        model: Some(best.model),
+        n_inliers: best.n_in,
+        inliers,
+        residuals: best.residuals,
+        score: best.cost,
+        ..r
+    })
+}
+
 /// Draws one hypothesis: up to `attempts` samples until one fits.
 fn draw<E: Estimator, R: Rng + ?Sized>(
     est: &E,
@@ -689,6 +806,22 @@ pub fn ransac_observed<E: Estimator, R: Rng + ?Sized>(
             have: n_items,
         });
     }
+    if config.max_scored_items > 0 && n_items > config.max_scored_items.max(s) {
+        return ransac_on_subset(est, n_items, config, rng, observer, run);
+    }
+    ransac_all(est, n_items, config, rng, observer, run)
+}
+
+/// [`ransac_observed`] scoring every item (the configuration checked by the caller).
+fn ransac_all<E: Estimator, R: Rng + ?Sized>(
+    est: &E,
+    n_items: usize,
+    config: &RansacConfig,
+    rng: &mut R,
+    observer: &mut dyn Observer,
+    run: usize,
+) -> Result<RansacResult<E::Model>> {
+    let s = est.min_sample_size();
     let n = n_items;
     let mut buf = Vec::with_capacity(s);
     let mut lo_improvements = 0;
