@@ -630,21 +630,14 @@ struct TrackStats {
 fn track_stats(table: &TrackTable) -> TrackStats {
     use rayon::prelude::*;
     let (nf, nt) = (table.n_frames(), table.n_tracks());
-    struct Chunk {
-        reference: Option<[f64; 2]>,
-        max_abs: f64,
-        finite: bool,
-        count: Vec<usize>,
-        mean: Vec<[f64; 2]>,
-        m2: Vec<f64>,
-    }
-    let chunk_of = |frames: std::ops::Range<usize>| -> Chunk {
-        let mut c = Chunk {
+    // A chunk's statistics: `mean` holds each track's shift (its first observation in
+    // the chunk) until the end of the chunk.
+    let chunk_of = |frames: std::ops::Range<usize>| -> TrackStats {
+        let mut c = TrackStats {
             reference: None,
             max_abs: 0.0,
             finite: true,
             count: vec![0; nt],
-            // The shift (first observation) until the end, then the mean.
             mean: vec![[0.0; 2]; nt],
             m2: vec![0.0; nt],
         };
@@ -681,7 +674,7 @@ fn track_stats(table: &TrackTable) -> TrackStats {
     };
     let threads = rayon::current_num_threads().max(1);
     let per = nf.div_ceil(threads).max(1);
-    let chunks: Vec<Chunk> = (0..nf.div_ceil(per))
+    let chunks: Vec<TrackStats> = (0..nf.div_ceil(per))
         .into_par_iter()
         .map(|i| chunk_of(i * per..((i + 1) * per).min(nf)))
         .collect();
@@ -711,14 +704,7 @@ fn track_stats(table: &TrackTable) -> TrackStats {
             acc.count[p] = na + nb;
         }
     }
-    TrackStats {
-        reference: acc.reference,
-        max_abs: acc.max_abs,
-        finite: acc.finite,
-        count: acc.count,
-        mean: acc.mean,
-        m2: acc.m2,
-    }
+    acc
 }
 
 /// At most `max` indices of `0..len`, evenly spaced, first and last included.
