@@ -79,6 +79,17 @@ pub struct Entry {
     pub y: f64,
 }
 
+impl Entry {
+    /// The entry at `(w + d) ∘ k` (componentwise): [`TrackTable::transform`]'s map.
+    fn moved(self, d: [f64; 2], k: [f64; 2]) -> Entry {
+        Entry {
+            track: self.track,
+            x: (self.x + d[0]) * k[0],
+            y: (self.y + d[1]) * k[1],
+        }
+    }
+}
+
 /// Two observations of the same (frame, track) pair given to
 /// [`TrackTable::from_observations`]: their positions in its input, and its ids back.
 #[derive(Debug)]
@@ -302,8 +313,8 @@ impl TrackTable {
 
     /// A table from observations `(frame, track, x, y)` (indices into the id lists), in
     /// any order. Sorts them by frame and track: `O(n log n)` time (`O(n)`, on all cores,
-    /// when they are already in that order), memory of the observations. A pair given twice is returned as a [`DuplicatePair`] (with the ids
-    /// handed back for the message).
+    /// when they are already in that order), memory of the observations. A pair given
+    /// twice is returned as a [`DuplicatePair`] (with the ids handed back for the message).
     ///
     /// # Panics
     /// If an index is out of range of its id list (a programming error).
@@ -662,8 +673,9 @@ impl TrackTable {
         min_frames_per_track: usize,
         min_points_per_frame: usize,
     ) -> (TrackTable, Vec<SetAside>, Vec<usize>, Vec<usize>) {
-        let (out, frames, tracks) = self.set_aside_plan(min_frames_per_track, min_points_per_frame);
-        (self.select(&frames, &tracks), out, frames, tracks)
+        let (kept, out, frames, tracks) =
+            self.set_aside_cow(min_frames_per_track, min_points_per_frame);
+        (kept.into_owned(), out, frames, tracks)
     }
 
     /// [`Self::set_aside`] without the copy when nothing is set aside (the table itself,
@@ -1045,8 +1057,7 @@ impl TrackTable {
         use rayon::prelude::*;
         self.rows.par_iter_mut().with_min_len(16).for_each(|row| {
             for e in row {
-                e.x = (e.x + d[0]) * k[0];
-                e.y = (e.y + d[1]) * k[1];
+                *e = e.moved(d, k);
             }
         });
     }
@@ -1059,15 +1070,7 @@ impl TrackTable {
             .rows
             .par_iter()
             .with_min_len(16)
-            .map(|row| {
-                row.iter()
-                    .map(|e| Entry {
-                        track: e.track,
-                        x: (e.x + d[0]) * k[0],
-                        y: (e.y + d[1]) * k[1],
-                    })
-                    .collect()
-            })
+            .map(|row| row.iter().map(|e| e.moved(d, k)).collect())
             .collect();
         TrackTable {
             frame_ids: self.frame_ids.clone(),
