@@ -1003,8 +1003,9 @@ impl CompletionProblem {
     /// the row means, it does not bias the start toward the frames' visible subsets (which
     /// shift with the camera when tracks enter and leave).
     ///
-    /// Dense: `O(F N r)` per sweep with the randomized truncated SVD ([`crate::svd`]),
-    /// `impute_iterations + 1` SVDs in all, once per completion.
+    /// Dense: `O(F N r)` time per sweep with the randomized truncated SVD
+    /// ([`crate::svd`]), `impute_iterations + 1` SVDs in all, once per completion; memory
+    /// one 2F×N matrix.
     pub fn auto_start(&self, impute_iterations: usize) -> Result<(Mat<f64>, Vec<f64>)> {
         let rows = 2 * self.n_frames;
         let mut mean = vec![0.0; rows];
@@ -1015,69 +1016,111 @@ impl CompletionProblem {
                 mean[2 * f + k] = self.row_w[lo..hi].iter().map(|w| w[k]).sum::<f64>() / n;
             }
         }
-        let mut a = Mat::<f64>::zeros(rows, self.n_points);
-        for f in 0..self.n_frames {
-            for o in self.row_ptr[f]..self.row_ptr[f + 1] {
-                let p = self.row_track[o];
-                for k in 0..2 {
-                    a[(2 * f + k, p)] = self.row_w[o][k] - mean[2 * f + k];
+        // The filled matrix, column-major (a column per track): observed entries centred
+        // by the row means and missing ones 0 (affine); the free model factors the filled
+        // matrix itself (observed entries as they are, missing = row mean).
+        let mut a = vec![0.0; rows * self.n_points];
+        if rows > 0 {
+            a.par_chunks_mut(rows).enumerate().for_each(|(p, col)| {
+                if !self.affine {
+                    col.copy_from_slice(&mean);
                 }
-            }
-        }
-        if !self.affine {
-            // Free model: factor the filled matrix itself (missing = row mean).
-            for i in 0..rows {
-                for p in 0..self.n_points {
-                    a[(i, p)] += mean[i];
+                for o in self.col_ptr[p]..self.col_ptr[p + 1] {
+                    let f = self.col_frame[o];
+                    for k in 0..2 {
+                        let centre = if self.affine { mean[2 * f + k] } else { 0.0 };
+                        col[2 * f + k] = self.col_w[o][k] - centre;
+                    }
                 }
-            }
+            });
         }
         self.impute(a, mean, impute_iterations)
     }
 
-    /// `sweeps` hard-impute sweeps on the filled matrix `a` (affine: centred, with row
-    /// means `mean`), then `M` = its leading left singular vectors, `t` = `mean`.
+    /// `sweeps` hard-impute sweeps on the filled matrix `a` (column-major, 2F×N; affine:
+    /// centred, with row means `mean`), then `M` = its leading left singular vectors,
+    /// `t` = `mean`.
+    ///
+    /// A sweep rebuilds each column `p` as `t + U Σ v_p` (`O(F r)`), puts the track's
+    /// observations back and accumulates the column into the new row means, a column of
+    /// `a` at a time on every core (contiguous reads and writes); the affine model then
+    /// subtracts the new means in a second pass. The per-block sums are added in block
+    /// order, so the result does not depend on the number of threads.
     fn impute(
         &self,
-        mut a: Mat<f64>,
+        mut a: Vec<f64>,
         mut mean: Vec<f64>,
         sweeps: usize,
     ) -> Result<(Mat<f64>, Vec<f64>)> {
+        const BLOCK: usize = 64;
         let rows = 2 * self.n_frames;
+        let n = self.n_points;
         let r = self.rank;
         let svd_cfg = crate::svd::TruncatedSvdConfig::default();
         let mut sweep = 0;
         loop {
-            let svd = crate::svd::truncated_svd(a.as_ref(), r, &svd_cfg)?;
+            let svd = crate::svd::truncated_svd(
+                MatRef::from_column_major_slice(&a, rows, n),
+                r,
+                &svd_cfg,
+            )?;
             let k = svd.s.len().min(r);
-            if sweep >= sweeps {
+            if sweep >= sweeps || rows == 0 {
                 let m = Mat::from_fn(rows, r, |i, c| if c < k { svd.u[(i, c)] } else { 0.0 });
                 let t = if self.affine { mean } else { vec![0.0; rows] };
                 return Ok((m, t));
             }
             sweep += 1;
             // a ← rank-r reconstruction (+ t) with the observed entries put back.
-            let (u, sv, v) = (&svd.u, &svd.s, &svd.v);
-            a = Mat::from_fn(rows, self.n_points, |i, p| {
-                let shift = if self.affine { mean[i] } else { 0.0 };
-                shift + (0..k).map(|c| u[(i, c)] * sv[c] * v[(p, c)]).sum::<f64>()
-            });
-            for f in 0..self.n_frames {
-                for o in self.row_ptr[f]..self.row_ptr[f + 1] {
-                    let p = self.row_track[o];
-                    for c in 0..2 {
-                        a[(2 * f + c, p)] = self.row_w[o][c];
+            let us: Vec<f64> = (0..k)
+                .flat_map(|c| (0..rows).map(move |i| (c, i)))
+                .map(|(c, i)| svd.u[(i, c)] * svd.s[c])
+                .collect();
+            let shift = if self.affine {
+                mean.clone()
+            } else {
+                vec![0.0; rows]
+            };
+            let v = &svd.v;
+            let block_sums: Vec<Vec<f64>> = a
+                .par_chunks_mut(rows * BLOCK)
+                .enumerate()
+                .map(|(b, block)| {
+                    let mut sum = vec![0.0; if self.affine { rows } else { 0 }];
+                    for (j, col) in block.chunks_mut(rows).enumerate() {
+                        let p = b * BLOCK + j;
+                        col.copy_from_slice(&shift);
+                        for c in 0..k {
+                            let vc = v[(p, c)];
+                            for (x, u) in col.iter_mut().zip(&us[c * rows..(c + 1) * rows]) {
+                                *x += u * vc;
+                            }
+                        }
+                        for o in self.col_ptr[p]..self.col_ptr[p + 1] {
+                            let f = self.col_frame[o];
+                            col[2 * f..2 * f + 2].copy_from_slice(&self.col_w[o]);
+                        }
+                        for (s, x) in sum.iter_mut().zip(col.iter()) {
+                            *s += x;
+                        }
                     }
-                }
-            }
+                    sum
+                })
+                .collect();
             if self.affine {
-                for (i, mi) in mean.iter_mut().enumerate() {
-                    *mi = (0..self.n_points).map(|p| a[(i, p)]).sum::<f64>()
-                        / self.n_points.max(1) as f64;
-                    for p in 0..self.n_points {
-                        a[(i, p)] -= *mi;
+                mean.fill(0.0);
+                for sum in &block_sums {
+                    for (m, s) in mean.iter_mut().zip(sum) {
+                        *m += s;
                     }
                 }
+                let inv = 1.0 / n.max(1) as f64;
+                mean.iter_mut().for_each(|m| *m *= inv);
+                a.par_chunks_mut(rows).for_each(|col| {
+                    for (x, m) in col.iter_mut().zip(&mean) {
+                        *x -= m;
+                    }
+                });
             }
         }
     }
