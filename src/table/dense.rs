@@ -266,69 +266,87 @@ const WRITE_BATCH_BYTES: usize = 8 << 20;
 
 /// Writes a rows×cols matrix to `w`, one row per line, values separated by one space, as
 /// [`push_f64`] formats them, a batch of rows (about [`WRITE_BATCH_BYTES`] of text) at a
-/// time, so the text is never held whole. Two threads work as a pipeline: the caller gathers
-/// a batch's values and writes the text of the batch before it, while a second thread
-/// formats. `O(rows·cols)` time, `O(WRITE_BATCH_BYTES)` memory.
+/// time, so the text is never held whole. A pipeline: the caller gathers a batch's values
+/// and writes the text of the batches before it in order, while one formatting thread per
+/// core (at most [`MAX_FORMAT_THREADS`]) formats the batches handed to it in turn.
+/// `O(rows·cols)` time, `O(WRITE_BATCH_BYTES · threads)` memory.
 ///
 /// Measured on the 2 000 × 20 000 `completed.txt` (740 MB, 2-vCPU machine): 10.9 s with one
-/// `write!` per value into one string; 3.3–4.3 s this way. Rows formatted in parallel by
-/// rayon took 7.7–9.5 s in the pipeline's process (4.2 s on one rayon thread), although the
-/// same code on a fresh process ran 1.4× faster on two threads than on one.
+/// `write!` per value into one string; 3.3–4.3 s with one formatting thread. Rows formatted in
+/// parallel by rayon took 7.7–9.5 s in the pipeline's process (4.2 s on one rayon thread),
+/// although the same code on a fresh process ran 1.4× faster on two threads than on one
+/// (faer's matrix products then shared rayon's global pool; see [`crate::svd::faer_pool`]):
+/// the formatting threads are the scope's own.
 pub(crate) fn write_matrix_to(
     w: &mut impl std::io::Write,
     rows: usize,
     cols: usize,
     value: impl Fn(usize, usize) -> f64,
 ) -> std::io::Result<()> {
-    write_matrix_batched(w, rows, cols, WRITE_BATCH_BYTES, value)
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, MAX_FORMAT_THREADS);
+    write_matrix_batched(w, rows, cols, WRITE_BATCH_BYTES, threads, value)
 }
 
 /// Columns per block of [`write_matrix_batched`]'s gather.
 const GATHER_COLS: usize = 64;
 
-/// [`write_matrix_to`] with `batch_bytes` of text per batch.
+/// Most formatting threads [`write_matrix_to`] starts.
+const MAX_FORMAT_THREADS: usize = 4;
+
+/// [`write_matrix_to`] with `batch_bytes` of text per batch and `threads` formatting threads.
 fn write_matrix_batched(
     w: &mut impl std::io::Write,
     rows: usize,
     cols: usize,
     batch_bytes: usize,
+    threads: usize,
     value: impl Fn(usize, usize) -> f64,
 ) -> std::io::Result<()> {
     use std::sync::mpsc;
     // ~18 bytes per value: the rows of one batch.
     let batch = (batch_bytes / (18 * cols.max(1))).max(1);
-    // Two buffers circulate: the caller gathers a batch's values into one while the
-    // formatting thread turns the other's into text.
-    let (to_format, formatted_in) = mpsc::sync_channel::<(Vec<f64>, Vec<u8>, usize)>(1);
-    let (to_write, formatted_out) = mpsc::sync_channel::<(Vec<f64>, Vec<u8>)>(2);
+    let n_batches = rows.div_ceil(batch);
+    let threads = threads.max(1);
     std::thread::scope(|scope| -> std::io::Result<()> {
-        scope.spawn(move || {
-            let mut buf = ryu::Buffer::new();
-            for (vals, mut text, nr) in formatted_in {
-                text.clear();
-                for i in 0..nr {
-                    let row = &vals[i * cols..(i + 1) * cols];
-                    for (c, &v) in row.iter().enumerate() {
-                        if c > 0 {
-                            text.push(b' ');
+        // Batch k goes to thread k mod `threads` and its text comes back on that thread's
+        // channel, so the text is written in order. At most two batches per thread are in
+        // flight: one being formatted or waiting to be written, one queued.
+        let mut to_format = Vec::with_capacity(threads);
+        let mut formatted = Vec::with_capacity(threads);
+        for _ in 0..threads {
+            let (tx_in, rx_in) = mpsc::sync_channel::<(Vec<f64>, Vec<u8>, usize)>(1);
+            let (tx_out, rx_out) = mpsc::sync_channel::<(Vec<f64>, Vec<u8>)>(1);
+            scope.spawn(move || {
+                let mut buf = ryu::Buffer::new();
+                for (vals, mut text, nr) in rx_in {
+                    text.clear();
+                    for i in 0..nr {
+                        let row = &vals[i * cols..(i + 1) * cols];
+                        for (c, &v) in row.iter().enumerate() {
+                            if c > 0 {
+                                text.push(b' ');
+                            }
+                            push_f64(&mut text, v, &mut buf);
                         }
-                        push_f64(&mut text, v, &mut buf);
+                        text.push(b'\n');
                     }
-                    text.push(b'\n');
+                    if tx_out.send((vals, text)).is_err() {
+                        return;
+                    }
                 }
-                if to_write.send((vals, text)).is_err() {
-                    return;
-                }
-            }
-        });
-        let mut spare = vec![(Vec::new(), Vec::new()), (Vec::new(), Vec::new())];
-        let mut in_flight = 0;
-        let mut start = 0;
-        while start < rows || in_flight > 0 {
-            if start < rows && in_flight < 2 {
+            });
+            to_format.push(tx_in);
+            formatted.push(rx_out);
+        }
+        let mut spare: Vec<(Vec<f64>, Vec<u8>)> = Vec::new();
+        let (mut sent, mut written) = (0, 0);
+        while written < n_batches {
+            if sent < n_batches && sent - written < 2 * threads {
                 let (mut vals, text) = spare.pop().unwrap_or_default();
-                let end = (start + batch).min(rows);
-                let nr = end - start;
+                let start = sent * batch;
+                let nr = (start + batch).min(rows) - start;
                 vals.clear();
                 vals.resize(nr * cols, 0.0);
                 // Gathered by blocks of columns, so that a column-major source (faer's
@@ -342,19 +360,18 @@ fn write_matrix_batched(
                         }
                     }
                 }
-                if to_format.send((vals, text, nr)).is_err() {
+                if to_format[sent % threads].send((vals, text, nr)).is_err() {
                     break;
                 }
-                in_flight += 1;
-                start = end;
+                sent += 1;
                 continue;
             }
-            let Ok((vals, text)) = formatted_out.recv() else {
+            let Ok((vals, text)) = formatted[written % threads].recv() else {
                 break;
             };
-            in_flight -= 1;
-            // (An error returns here: `to_format` is dropped with this closure, which ends
-            // the formatting thread before the scope joins it.)
+            written += 1;
+            // (An error returns here: the channels are dropped with this closure, which ends
+            // the formatting threads before the scope joins them.)
             w.write_all(&text)?;
             spare.push((vals, text));
         }
@@ -471,12 +488,23 @@ mod tests {
             want.push('\n');
         }
         assert_eq!(String::from_utf8(got).unwrap(), want);
-        // Batches of one row, of two rows and of every row.
+        // Batches of one row, of two rows and of every row, on one to three formatting
+        // threads (batches handed out in turn must come back in order).
         for batch_bytes in [1, 18 * cols * 2, 18 * cols * 100] {
-            let mut got = Vec::new();
-            write_matrix_batched(&mut got, rows, cols, batch_bytes, value).unwrap();
-            assert_eq!(String::from_utf8(got).unwrap(), want, "{batch_bytes}");
+            for threads in 1..=3 {
+                let mut got = Vec::new();
+                write_matrix_batched(&mut got, rows, cols, batch_bytes, threads, value).unwrap();
+                assert_eq!(
+                    String::from_utf8(got).unwrap(),
+                    want,
+                    "{batch_bytes} {threads}"
+                );
+            }
         }
+        // No columns: a line per row.
+        let mut got = Vec::new();
+        write_matrix_batched(&mut got, 3, 0, 1, 2, |_, _| 0.0).unwrap();
+        assert_eq!(got, b"\n\n\n");
     }
 
     #[test]
