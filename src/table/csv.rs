@@ -176,9 +176,12 @@ fn read_in_pieces<R: Read>(
         .filter(|&nl| plain(&data[..=nl]) && !data[..nl].trim_ascii().is_empty());
     let Some(nl) = header_end else {
         // A quoted or unusual header: one streaming reader for the whole file.
-        let mut rdr = csv_reader(std::io::Cursor::new(data).chain(reader), true);
+        let mut rdr = csv_reader(
+            LineEnds::new(std::io::Cursor::new(data).chain(reader)),
+            true,
+        );
         let (col, warnings) = header(&mut rdr, path)?;
-        read_all_in_parts(&mut rdr, &col, 0, path, take)?;
+        read_all_in_parts(&mut rdr, &col, 1, path, take)?;
         return Ok(warnings);
     };
     let (col, warnings) = header(&mut csv_reader(&data[..nl], true), path)?;
@@ -196,8 +199,11 @@ fn read_in_pieces<R: Read>(
         };
         let Some(cut) = cut.filter(|&c| plain(&data[..c])) else {
             // No line end in a whole block, or quotes: stream the rest with one reader.
-            let mut rdr = csv_reader(std::io::Cursor::new(data).chain(reader), false);
-            read_all_in_parts(&mut rdr, &col, line - 1, path, take)?;
+            let mut rdr = csv_reader(
+                LineEnds::new(std::io::Cursor::new(data).chain(reader)),
+                false,
+            );
+            read_all_in_parts(&mut rdr, &col, line, path, take)?;
             break;
         };
         let parts = split_at_lines(&data[..cut], pieces);
@@ -226,17 +232,18 @@ fn read_in_pieces<R: Read>(
     Ok(warnings)
 }
 
-/// Every record of `rdr`, handed to `take` [`FALLBACK_RECORDS`] at a time.
+/// Every record of `rdr` (whose input starts on line `first_line`), handed to `take`
+/// [`FALLBACK_RECORDS`] at a time.
 fn read_all_in_parts<R: Read>(
-    rdr: &mut ::csv::Reader<R>,
+    rdr: &mut ::csv::Reader<LineEnds<R>>,
     col: &[usize; 4],
-    line_offset: usize,
+    first_line: usize,
     path: &Path,
     take: &mut dyn FnMut(Rows) -> Result<()>,
 ) -> Result<()> {
     loop {
         let mut part = Rows::default();
-        let done = part.read_all(rdr, col, line_offset, path, FALLBACK_RECORDS)?;
+        let done = part.read_all(rdr, col, first_line, path, FALLBACK_RECORDS)?;
         take(part)?;
         if done {
             return Ok(());
@@ -325,6 +332,74 @@ pub fn scan_reader<R: Read>(
         observations,
         warnings,
     })
+}
+
+/// A reader that notes where the lines end in what passes through it, so that a record's
+/// position gives its line: a line ends at `\n`, at `\r\n` and at a lone `\r` (the csv
+/// crate's record terminators; a quoted field's line end counts too, as in the text).
+/// Memory: the line ends read ahead of the last position asked for (one buffer's worth).
+struct LineEnds<R> {
+    inner: R,
+    /// Bytes passed so far.
+    offset: u64,
+    /// Each line end passed and not yet counted: its first byte and the byte after it.
+    ends: std::collections::VecDeque<(u64, u64)>,
+    /// The position of the last `\r` passed.
+    last_cr: Option<u64>,
+    /// Line ends counted by [`LineEnds::line_ends_before_record`] so far.
+    counted: usize,
+}
+
+impl<R> LineEnds<R> {
+    fn new(inner: R) -> Self {
+        Self {
+            inner,
+            offset: 0,
+            ends: std::collections::VecDeque::new(),
+            last_cr: None,
+            counted: 0,
+        }
+    }
+
+    /// Line ends before the first byte of the record the csv reader says starts at byte
+    /// `pos`. (The reader's position is where it began to look for the record: right after
+    /// the last record's terminator byte — inside a `\r\n` — and before the blank lines it
+    /// skips; so the line ends that follow `pos` without a byte between them are before
+    /// the record too.) Positions must not decrease from one call to the next. `O(1)`
+    /// amortized.
+    fn line_ends_before_record(&mut self, pos: u64) -> usize {
+        let mut cursor = pos;
+        while let Some(&(at, next)) = self.ends.front() {
+            if at < pos || at == cursor {
+                cursor = cursor.max(next);
+                self.ends.pop_front();
+                self.counted += 1;
+            } else {
+                break;
+            }
+        }
+        self.counted
+    }
+}
+
+impl<R: Read> Read for LineEnds<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        for i in memchr::memchr2_iter(b'\n', b'\r', &buf[..n]) {
+            let at = self.offset + i as u64;
+            let crlf = buf[i] == b'\n' && at > 0 && self.last_cr == Some(at - 1);
+            match self.ends.back_mut() {
+                // The `\n` of a `\r\n`: one line end with its `\r`.
+                Some(last) if crlf && last.0 + 1 == at => last.1 = at + 1,
+                _ => self.ends.push_back((at, at + 1)),
+            }
+            if buf[i] == b'\r' {
+                self.last_cr = Some(at);
+            }
+        }
+        self.offset += n as u64;
+        Ok(n)
+    }
 }
 
 /// A CSV reader with rank3's settings: flexible rows, the header's fields trimmed (a
@@ -437,15 +512,15 @@ struct Rows {
 
 impl Rows {
     /// Reads the records of `rdr` (columns `col`), at most `limit`; true when the input
-    /// ended. Line numbers: the reader's, offset by `line_offset`. (After a CRLF the csv
-    /// crate's count is one short: it numbers a record before consuming the `\n` left over
-    /// from the previous record's `\r\n`. Plain text, the usual case, is read by
-    /// [`Rows::read_plain`], which counts exactly.)
+    /// ended. Line numbers: `first_line` for the input's first byte, then one more after
+    /// each line end before a record's first byte ([`LineEnds`]; the csv crate's own count
+    /// is one short after a CRLF: it numbers a record before consuming the `\n` left over
+    /// from the previous record's `\r\n`).
     fn read_all<R: Read>(
         &mut self,
-        rdr: &mut ::csv::Reader<R>,
+        rdr: &mut ::csv::Reader<LineEnds<R>>,
         col: &[usize; 4],
-        line_offset: usize,
+        first_line: usize,
         path: &Path,
         limit: usize,
     ) -> Result<bool> {
@@ -460,11 +535,17 @@ impl Rows {
                 Ok(true) => {}
                 Ok(false) => return Ok(true),
                 Err(e) => {
-                    let line = e.position().map_or(0, |p| p.line() as usize);
-                    return Err(Error::parse(path, line + line_offset, "row", e.to_string()));
+                    let line = match e.position() {
+                        Some(pos) => first_line + rdr.get_mut().line_ends_before_record(pos.byte()),
+                        None => 0,
+                    };
+                    return Err(Error::parse(path, line, "row", e.to_string()));
                 }
             }
-            let line = rec.position().map_or(0, |p| p.line() as usize) + line_offset;
+            let line = match rec.position() {
+                Some(pos) => first_line + rdr.get_mut().line_ends_before_record(pos.byte()),
+                None => 0,
+            };
             self.push(&rec, col, line, path)?;
         }
     }
@@ -752,10 +833,8 @@ mod tests {
     }
 
     /// The plain split ([`Rows::read_plain`]) against the csv reader ([`Rows::read_all`])
-    /// on the same plain text: the same rows and ids, or the same error; the rows' lines are
-    /// those of the text's non-blank lines. (The csv reader's own line count is short after
-    /// a blank line or a CRLF, so it judges only the errors, which no such line precedes
-    /// here.)
+    /// on the same plain text: the same rows and ids, or the same error; the rows' lines are,
+    /// for both, those of the text's non-blank lines.
     #[test]
     fn plain_split_reads_what_the_csv_reader_reads() {
         let col = [1, 3, 0, 2]; // x,frame,y,track
@@ -781,9 +860,9 @@ mod tests {
             let csv_rows = {
                 let mut r = Rows::default();
                 r.read_all(
-                    &mut csv_reader(text.as_bytes(), false),
+                    &mut csv_reader(LineEnds::new(text.as_bytes()), false),
                     &col,
-                    1,
+                    2,
                     p(),
                     usize::MAX,
                 )
@@ -800,6 +879,7 @@ mod tests {
                 (Ok(a), Ok(b)) => {
                     assert_eq!(a.obs, b.obs, "{text:?}");
                     assert_eq!(a.lines, non_blank, "{text:?}");
+                    assert_eq!(b.lines, non_blank, "{text:?}");
                     assert_eq!(a.frames.ids, b.frames.ids, "{text:?}");
                     assert_eq!(a.tracks.ids, b.tracks.ids, "{text:?}");
                 }
@@ -848,6 +928,42 @@ mod tests {
     fn crlf_lines_are_numbered_as_lines() {
         let (l, f, _) = err("x,frame,y,track\r\n1,0,2,0\r\n\r\n1x,0,2,1\r\n");
         assert_eq!((l, f.as_str()), (4, "x"));
+    }
+
+    /// Files the streaming csv reader reads (a quote in the header or in a later block):
+    /// errors name the line the text editor shows, after CRLF, blank lines, lone CRs and
+    /// a quoted field holding line ends.
+    #[test]
+    fn quoted_files_name_the_right_line() {
+        let cases = [
+            (
+                "\"frame\",\"track\",x,y\r\n0,0,1,2\r\n0,1,1,2\r\n0,3,abc,2\r\n",
+                4,
+            ),
+            (
+                "\"frame\",track,x,y\r\n0,0,1,2\r\n\r\n\r\n0,2,1,2\r\n0,3,abc,2\r\n",
+                6,
+            ),
+            ("\"frame\",track,x,y\n0,0,1,2\n\n0,3,abc,2\n", 4),
+            ("\"frame\",track,x,y\r0,0,1,2\r0,3,abc,2\r", 3),
+            ("frame,track,x,y\n0,\"a\nb\",1,2\n0,3,abc,2\n", 4),
+            (
+                "frame,track,x,y\r\n0,\"a\r\nb\",1,2\r\n\r\n0,3,abc,2\r\n",
+                5,
+            ),
+        ];
+        for (text, line) in cases {
+            for (piece_bytes, n) in [(1 << 30, 1), (8, 2)] {
+                let (l, f, m) =
+                    crate::table::parse_error_parts(pieces(text, piece_bytes, n).unwrap_err());
+                assert_eq!((l, f.as_str()), (line, "x"), "{text:?} {piece_bytes}: {m}");
+            }
+        }
+        // A row's line in a file read whole by the streaming reader: each observation's.
+        let text = "\"frame\",track,x,y\r\n0,0,1,2\r\n\r\n0,1,3,4\r\n0,2,3,4\r\n0,1,5,6\r\n";
+        let (l, f, m) = crate::table::parse_error_parts(pieces(text, 1 << 30, 1).unwrap_err());
+        assert_eq!((l, f.as_str()), (6, "track"), "{m}");
+        assert!(m.contains("first on line 4"), "{m}");
     }
 
     fn err(txt: &str) -> (usize, String, String) {
