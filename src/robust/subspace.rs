@@ -328,9 +328,9 @@ impl TrackSubspace {
     ) -> Self {
         let rows = 2 * meas.n_frames();
         let mut obs = vec![0.0; rows * meas.n_points()];
-        for (p, col) in obs.chunks_exact_mut(rows.max(1)).enumerate() {
-            col.copy_from_slice(meas.w.col_as_slice(p));
-        }
+        obs.par_chunks_exact_mut(rows.max(1))
+            .enumerate()
+            .for_each(|(p, col)| col.copy_from_slice(meas.w.col_as_slice(p)));
         Self::build(Arc::new(obs), meas, cfg, excluded)
     }
 
