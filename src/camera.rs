@@ -141,21 +141,31 @@ impl MetricModel {
     /// Per-point linear least-squares triangulation given the cameras:
     /// `X_p = argmin Σ_f ‖s_f R_f[0..2] X − (w_fp − t_f)‖²` over the frames observing `p`.
     ///
-    /// Each point solves a 3×3 normal system, so the cost is O(observations). Points whose
-    /// normal matrix is singular (seen from a single viewing direction) keep their previous
-    /// value and are returned in the list of indices.
+    /// Each point solves a 3×3 normal system, so the cost is O(observations), the points
+    /// on all cores (each point's sums in increasing frame order, whatever the thread
+    /// count). Points whose normal matrix is singular (seen from a single viewing
+    /// direction) keep their previous value and are returned in the list of indices.
     pub fn triangulate(&mut self, meas: &Measurements) -> Vec<usize> {
-        let n = meas.n_points();
-        let mut ata = vec![Matrix3::<f64>::zeros(); n];
-        let mut atb = vec![Vector3::<f64>::zeros(); n];
-        // Each point's sums in increasing frame order, as before the tiled walk.
-        meas.for_each_observed(|f, p| {
-            let w = [meas.w[(2 * f, p)], meas.w[(2 * f + 1, p)]];
-            self.accumulate(f, w, &mut ata[p], &mut atb[p]);
-        });
+        use rayon::prelude::*;
+        let (nf, n) = (meas.n_frames(), meas.n_points());
+        let this = &*self;
+        let solved: Vec<Option<Vector3<f64>>> = (0..n)
+            .into_par_iter()
+            .with_min_len(crate::measurements::TILE_TRACKS)
+            .map(|p| {
+                let (mut ata, mut atb) = (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
+                for f in 0..nf {
+                    if meas.visible[f * n + p] {
+                        let w = [meas.w[(2 * f, p)], meas.w[(2 * f + 1, p)]];
+                        this.accumulate(f, w, &mut ata, &mut atb);
+                    }
+                }
+                solve_point(&ata, &atb)
+            })
+            .collect();
         let mut failed = Vec::new();
-        for p in 0..n {
-            match solve_point(&ata[p], &atb[p]) {
+        for (p, x) in solved.into_iter().enumerate() {
+            match x {
                 Some(x) => self.points[p] = x,
                 None => failed.push(p),
             }
