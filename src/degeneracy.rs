@@ -707,13 +707,14 @@ fn track_stats(table: &TrackTable) -> TrackStats {
     acc
 }
 
-/// At most `max` indices of `0..len`, evenly spaced, first and last included.
-fn spaced(len: usize, max: usize) -> Vec<usize> {
+/// At most `max` indices of `0..len`, evenly spaced (rounded to nearest), first and last
+/// included (`max = 1`: the first only), ascending and distinct.
+pub(crate) fn spaced(len: usize, max: usize) -> Vec<usize> {
     if len <= max {
         return (0..len).collect();
     }
     (0..max)
-        .map(|i| (i * (len - 1) + (max - 1) / 2) / (max - 1))
+        .map(|i| (i * (len - 1) + (max - 1) / 2) / (max - 1).max(1))
         .collect()
 }
 

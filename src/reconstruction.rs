@@ -2490,15 +2490,7 @@ fn projective_iteration_flops(meas: &Measurements) -> f64 {
 /// on the whole table. `O(F N)`.
 fn pretest_subset(meas: &Measurements) -> Option<(Vec<usize>, Vec<usize>)> {
     let (nf, np) = (meas.n_frames(), meas.n_points());
-    let frames: Vec<usize> = if nf <= PRETEST_FRAMES {
-        (0..nf).collect()
-    } else {
-        let mut v: Vec<usize> = (0..PRETEST_FRAMES)
-            .map(|i| (i * (nf - 1) + (PRETEST_FRAMES - 1) / 2) / (PRETEST_FRAMES - 1))
-            .collect();
-        v.dedup();
-        v
-    };
+    let frames = crate::degeneracy::spaced(nf, PRETEST_FRAMES);
     let seen = |p: usize| frames.iter().filter(|&&f| meas.is_visible(f, p)).count();
     let candidates: Vec<usize> = (0..np).filter(|&p| seen(p) >= 3).collect();
     if candidates.len() < 7 {

@@ -559,8 +559,8 @@ fn focal_sample(n: usize, m: usize) -> Vec<bool> {
         keep[(n - 1) / 2] = true;
         return keep;
     }
-    for j in 0..m {
-        keep[(j * (n - 1) + (m - 1) / 2) / (m - 1)] = true;
+    for j in crate::degeneracy::spaced(n, m) {
+        keep[j] = true;
     }
     keep
 }

@@ -606,10 +606,10 @@ impl TrackSubspace {
         if !self.complete || max == 0 || inliers.len() <= max {
             return std::borrow::Cow::Borrowed(inliers);
         }
-        let n = inliers.len();
         std::borrow::Cow::Owned(
-            (0..max)
-                .map(|i| inliers[(i * (n - 1) + (max - 1) / 2) / (max - 1).max(1)])
+            crate::degeneracy::spaced(inliers.len(), max)
+                .into_iter()
+                .map(|i| inliers[i])
                 .collect(),
         )
     }
