@@ -559,6 +559,14 @@ fn residuals_bounded<E: Estimator>(
     Some(out)
 }
 
+/// Per item: its residual is at most `tau` (an unscored item is not an inlier).
+fn inlier_flags(residuals: &[Option<f64>], tau: f64) -> Vec<bool> {
+    residuals
+        .iter()
+        .map(|r| matches!(r, Some(r) if *r <= tau))
+        .collect()
+}
+
 fn inlier_indices(residuals: &[Option<f64>], tau: f64) -> Vec<usize> {
     residuals
         .iter()
@@ -718,11 +726,7 @@ fn ransac_on_subset<E: Estimator, R: Rng + ?Sized>(
         });
     };
     let best = score(est, model, n, r.threshold);
-    let inliers: Vec<bool> = best
-        .residuals
-        .iter()
-        .map(|x| matches!(x, Some(x) if *x <= r.threshold))
-        .collect();
+    let inliers = inlier_flags(&best.residuals, r.threshold);
     Ok(RansacResult {
         model: Some(best.model),
         n_inliers: best.n_in,
@@ -1016,11 +1020,7 @@ fn ransac_all<E: Estimator, R: Rng + ?Sized>(
             sigma = Some(sg);
         }
     }
-    let inliers: Vec<bool> = best
-        .residuals
-        .iter()
-        .map(|r| matches!(r, Some(r) if *r <= tau))
-        .collect();
+    let inliers = inlier_flags(&best.residuals, tau);
     Ok(RansacResult {
         model: Some(best.model),
         n_inliers: best.n_in,

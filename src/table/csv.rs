@@ -380,6 +380,14 @@ impl<R> LineEnds<R> {
         }
         self.counted
     }
+
+    /// The line of the record at `pos` (the csv reader's position of it) when the input
+    /// starts on line `first_line`; 0 without a position.
+    fn line(&mut self, first_line: usize, pos: Option<&::csv::Position>) -> usize {
+        pos.map_or(0, |pos| {
+            first_line + self.line_ends_before_record(pos.byte())
+        })
+    }
 }
 
 impl<R: Read> Read for LineEnds<R> {
@@ -535,17 +543,11 @@ impl Rows {
                 Ok(true) => {}
                 Ok(false) => return Ok(true),
                 Err(e) => {
-                    let line = match e.position() {
-                        Some(pos) => first_line + rdr.get_mut().line_ends_before_record(pos.byte()),
-                        None => 0,
-                    };
+                    let line = rdr.get_mut().line(first_line, e.position());
                     return Err(Error::parse(path, line, "row", e.to_string()));
                 }
             }
-            let line = match rec.position() {
-                Some(pos) => first_line + rdr.get_mut().line_ends_before_record(pos.byte()),
-                None => 0,
-            };
+            let line = rdr.get_mut().line(first_line, rec.position());
             self.push(&rec, col, line, path)?;
         }
     }
