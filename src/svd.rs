@@ -314,11 +314,19 @@ fn faer_pool() -> Option<&'static rayon::ThreadPool> {
     .as_ref()
 }
 
-/// `f` on [`faer_pool`] (here when there is none).
+/// `f` on [`faer_pool`] when called from outside every rayon pool; here, on the calling
+/// thread, when there is no such pool or the caller is already a rayon worker.
+///
+/// A worker that hands `f` to another pool blocks until it is done, and while it waits it
+/// runs other jobs of its own pool — in a parallel loop over windows, other windows, each
+/// of which blocks on its own SVD in turn: the stack grew by a window per wait, and the
+/// 20 000-frame sparse table (a thousand windows) overflowed a worker's stack and
+/// aborted. Inside a parallel loop the loop already holds the cores, so `f` runs where
+/// it was called (faer's products then use the caller's pool, as a nested rayon job).
 fn in_faer_pool<T: Send>(f: impl FnOnce() -> T + Send) -> T {
     match faer_pool() {
-        Some(pool) => pool.install(f),
-        None => f(),
+        Some(pool) if rayon::current_thread_index().is_none() => pool.install(f),
+        _ => f(),
     }
 }
 
@@ -879,6 +887,46 @@ mod tests {
                 Err(Error::InvalidConfig { .. })
             ));
         }
+    }
+
+    /// From outside any pool the products go to the SVD's own pool; from a worker of a
+    /// parallel loop they stay on that worker, which never waits on another pool (where
+    /// it would run the loop's other items inside the wait, one nested in the next: the
+    /// stack overflow of a thousand-window sparse start).
+    #[test]
+    fn a_parallel_loop_is_not_nested_into_the_svd_pool() {
+        use rayon::prelude::*;
+        use std::cell::Cell;
+        thread_local!(static DEPTH: Cell<usize> = const { Cell::new(0) });
+        let name = in_faer_pool(|| std::thread::current().name().map(str::to_owned));
+        if faer_pool().is_some() {
+            assert!(name.is_some_and(|n| n.starts_with("rank3-faer-")));
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let deepest = pool.install(|| {
+            (0..64)
+                .into_par_iter()
+                .map(|_| {
+                    let depth = DEPTH.with(|d| {
+                        d.set(d.get() + 1);
+                        d.get()
+                    });
+                    let caller = std::thread::current().id();
+                    let (same, _) = in_faer_pool(|| {
+                        std::thread::sleep(std::time::Duration::from_millis(2));
+                        (std::thread::current().id() == caller, ())
+                    });
+                    DEPTH.with(|d| d.set(d.get() - 1));
+                    assert!(same, "the SVD left the loop's worker");
+                    depth
+                })
+                .max()
+                .unwrap()
+        });
+        assert_eq!(deepest, 1, "a loop item ran inside another's wait");
     }
 
     #[test]
