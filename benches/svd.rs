@@ -137,6 +137,7 @@ fn bench_svd(cr: &mut Criterion) {
             let iters = match tr.method {
                 SvdMethod::Randomized { iterations, .. } => iterations.to_string(),
                 SvdMethod::Thin => "thin (fallback)".to_string(),
+                SvdMethod::Gram => "gram".to_string(),
             };
             table.push((id.clone(), name.to_string(), iters, angle_u, angle_v, rel));
             group.bench_with_input(BenchmarkId::new(*name, &id), &w, |b, w| {

@@ -3063,7 +3063,8 @@ fn factorize_complete(meas: &Measurements, cfg: &TruncatedSvdConfig) -> Result<A
             method: "svd".into(),
             svd_method: match svd.method {
                 SvdMethod::Thin => "thin".into(),
-                _ => "randomized".into(),
+                SvdMethod::Gram => "gram".into(),
+                SvdMethod::Randomized { .. } => "randomized".into(),
             },
             svd_fallback_reason: svd.fallback_reason,
             rms_px: rms,

@@ -1004,8 +1004,9 @@ impl CompletionProblem {
     /// shift with the camera when tracks enter and leave).
     ///
     /// Dense: `O(F N r)` time per sweep with the randomized truncated SVD
-    /// ([`crate::svd`]), `impute_iterations + 1` SVDs in all, once per completion; memory
-    /// one 2F×N matrix.
+    /// ([`crate::svd`]), or `O(F² N)` by the Gram matrix for up to
+    /// [`GRAM_START_MAX_ROWS`] rows (faster there), `impute_iterations + 1` SVDs in all,
+    /// once per completion; memory one 2F×N matrix.
     pub fn auto_start(&self, impute_iterations: usize) -> Result<(Mat<f64>, Vec<f64>)> {
         let rows = 2 * self.n_frames;
         let mut mean = vec![0.0; rows];
@@ -1059,11 +1060,12 @@ impl CompletionProblem {
         let svd_cfg = crate::svd::TruncatedSvdConfig::default();
         let mut sweep = 0;
         loop {
-            let svd = crate::svd::truncated_svd(
-                MatRef::from_column_major_slice(&a, rows, n),
-                r,
-                &svd_cfg,
-            )?;
+            let view = MatRef::from_column_major_slice(&a, rows, n);
+            let svd = if gram_start(rows, n) {
+                crate::svd::leading_by_gram(view, r)?
+            } else {
+                crate::svd::truncated_svd(view, r, &svd_cfg)?
+            };
             let k = svd.s.len().min(r);
             if sweep >= sweeps || rows == 0 {
                 let m = Mat::from_fn(rows, r, |i, c| if c < k { svd.u[(i, c)] } else { 0.0 });
@@ -1320,3 +1322,18 @@ pub(crate) fn report(
 
 #[cfg(test)]
 mod tests;
+
+/// The hard-impute sweeps of [`CompletionProblem::auto_start`] take the leading subspace
+/// from the eigen-decomposition of the filled matrix's Gram matrix
+/// ([`crate::svd::leading_by_gram`], `O(rows² N)`, no iteration) when it has at most this
+/// many rows (and no more rows than columns), and from the randomized sketch
+/// ([`crate::svd::truncated_svd`]) otherwise. The start needs only the leading rank-`r`
+/// subspace, not the sketch's accuracy on `σ₄`. Measured (ten sweeps, `auto_start`, 50 %
+/// missing, release, 2 vCPUs; docs/results.md): 80 × 1 500 0.092 → 0.015 s, 160 × 3 000
+/// 0.22 → 0.077 s, 200 × 5 000 0.39 → 0.17 s, 300 × 5 000 0.46 → 0.33 s, 400 × 5 000
+/// 0.57 → 0.52 s, 600 × 5 000 0.69 → 1.12 s (slower).
+const GRAM_START_MAX_ROWS: usize = 256;
+
+fn gram_start(rows: usize, n: usize) -> bool {
+    rows <= GRAM_START_MAX_ROWS && rows <= n
+}
