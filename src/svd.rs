@@ -80,6 +80,19 @@
 //! `σ = 0` with coordinate vectors as `U`, `V`. Small matrices
 //! (`min(m,n) ≤ small_dense_threshold`) or requests with `2(k+p) > min(m,n)` go straight
 //! to the thin SVD (the sketch would not be cheaper). Non-finite entries are an error.
+//!
+//! # The Gram route (starts only)
+//!
+//! `leading_by_gram` (crate-internal) takes the leading triplets of a short, wide matrix
+//! from the eigen-decomposition of `A Aᵀ`: `O(m² n)`, no iteration, but vectors accurate
+//! only to `≈ ε σ₁² / gap²`. The completion's hard-impute start uses it up to 256 rows,
+//! where it is 1.4–6× faster than the sketch (docs/results.md, #21).
+//!
+//! # Threads
+//!
+//! Called from outside any rayon pool, the products run on a pool of their own (see
+//! `faer_pool`); called from a rayon worker (a parallel loop over windows, say), they stay
+//! on that worker's pool.
 
 use faer::{Mat, MatRef};
 use rand::rngs::StdRng;

@@ -1004,8 +1004,8 @@ impl CompletionProblem {
     /// shift with the camera when tracks enter and leave).
     ///
     /// Dense: `O(F N r)` time per sweep with the randomized truncated SVD
-    /// ([`crate::svd`]), or `O(F² N)` by the Gram matrix for up to
-    /// [`GRAM_START_MAX_ROWS`] rows (faster there), `impute_iterations + 1` SVDs in all,
+    /// ([`crate::svd`]), or `O(F² N)` by the Gram matrix for up to 256 rows (faster
+    /// there; see `GRAM_START_MAX_ROWS`), `impute_iterations + 1` SVDs in all,
     /// once per completion; memory one 2F×N matrix.
     pub fn auto_start(&self, impute_iterations: usize) -> Result<(Mat<f64>, Vec<f64>)> {
         let rows = 2 * self.n_frames;
