@@ -344,9 +344,9 @@ pub(crate) fn leading_by_gram(a: MatRef<'_, f64>, k: usize) -> Result<TruncatedS
         message: format!("{e:?}"),
     })?;
     let (vals, vecs) = (evd.S().column_vector(), evd.U());
-    // Descending order; rounding can leave tiny negative eigenvalues.
-    // Descending order. An eigenvalue of G is known to ≈ ε·max(m, n)·σ₁², so a singular
-    // value below √(ε·max(m, n))·σ₁ is not resolved: reported as 0, with v = 0.
+    // Descending order (rounding can leave tiny negative eigenvalues). An eigenvalue of G
+    // is known to ≈ ε·max(m, n)·σ₁², so a singular value below √(ε·max(m, n))·σ₁ is not
+    // resolved: reported as 0, with v = 0.
     let top = vals[m - 1].max(0.0);
     let floor = f64::EPSILON * m.max(n) as f64 * top;
     let singular_values: Vec<f64> = (0..m)
