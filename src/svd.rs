@@ -231,18 +231,7 @@ pub fn truncated_svd_observed(
     let mn = m.min(n);
     let k = k.min(mn);
 
-    let mut frob2 = 0.0;
-    for j in 0..n {
-        for i in 0..m {
-            let x = a[(i, j)];
-            if !x.is_finite() {
-                return Err(Error::Degenerate(format!(
-                    "truncated SVD: matrix entry ({i}, {j}) is not finite ({x})"
-                )));
-            }
-            frob2 += x * x;
-        }
-    }
+    let frob2 = finite_frobenius2(a)?;
     if k == 0 {
         return Ok(empty(m, n));
     }
@@ -314,15 +303,7 @@ pub fn truncated_svd_observed(
 pub(crate) fn leading_by_gram(a: MatRef<'_, f64>, k: usize) -> Result<TruncatedSvd> {
     let (m, n) = (a.nrows(), a.ncols());
     let k = k.min(m).min(n);
-    if let Some((i, j)) = (0..n)
-        .flat_map(|j| (0..m).map(move |i| (i, j)))
-        .find(|&(i, j)| !a[(i, j)].is_finite())
-    {
-        return Err(Error::Degenerate(format!(
-            "truncated SVD: matrix entry ({i}, {j}) is not finite ({})",
-            a[(i, j)]
-        )));
-    }
+    finite_frobenius2(a)?;
     if k == 0 {
         return Ok(empty(m, n));
     }
@@ -373,6 +354,23 @@ pub(crate) fn leading_by_gram(a: MatRef<'_, f64>, k: usize) -> Result<TruncatedS
         residual,
         converged: true,
     })
+}
+
+/// `‖A‖_F²`, or [`Error::Degenerate`] naming the first non-finite entry (column by column).
+fn finite_frobenius2(a: MatRef<'_, f64>) -> Result<f64> {
+    let mut frob2 = 0.0;
+    for j in 0..a.ncols() {
+        for i in 0..a.nrows() {
+            let x = a[(i, j)];
+            if !x.is_finite() {
+                return Err(Error::Degenerate(format!(
+                    "truncated SVD: matrix entry ({i}, {j}) is not finite ({x})"
+                )));
+            }
+            frob2 += x * x;
+        }
+    }
+    Ok(frob2)
 }
 
 /// The `(iteration, cost)` of the sketch's [`Event::Iteration`]s (sent to the caller's
