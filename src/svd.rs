@@ -307,23 +307,28 @@ pub(crate) fn leading_by_gram(a: MatRef<'_, f64>, k: usize) -> Result<TruncatedS
     if k == 0 {
         return Ok(empty(m, n));
     }
-    // On the SVD's own pool, as the sketch's products (see `faer_pool`).
-    let evd = in_faer_pool(|| {
-        let mut g = Mat::<f64>::zeros(m, m);
-        faer::linalg::matmul::matmul(
-            g.as_mut(),
-            faer::Accum::Replace,
-            a,
-            a.transpose(),
-            1.0,
-            faer::get_global_parallelism(),
-        );
-        g.self_adjoint_eigen(faer::Side::Lower)
-    })
-    .map_err(|e| Error::Numerical {
-        stage: "Gram eigen-decomposition",
-        message: format!("{e:?}"),
-    })?;
+    // Every product on the SVD's own pool, as the sketch's (see `faer_pool`).
+    in_faer_pool(|| gram_triplets(a, k))
+}
+
+/// The body of [`leading_by_gram`] for a finite `a` and `1 ≤ k ≤ min(m, n)`.
+fn gram_triplets(a: MatRef<'_, f64>, k: usize) -> Result<TruncatedSvd> {
+    let (m, n) = (a.nrows(), a.ncols());
+    let mut g = Mat::<f64>::zeros(m, m);
+    faer::linalg::matmul::matmul(
+        g.as_mut(),
+        faer::Accum::Replace,
+        a,
+        a.transpose(),
+        1.0,
+        faer::get_global_parallelism(),
+    );
+    let evd = g
+        .self_adjoint_eigen(faer::Side::Lower)
+        .map_err(|e| Error::Numerical {
+            stage: "Gram eigen-decomposition",
+            message: format!("{e:?}"),
+        })?;
     let (vals, vecs) = (evd.S().column_vector(), evd.U());
     // Descending order (rounding can leave tiny negative eigenvalues). An eigenvalue of G
     // is known to ≈ ε·max(m, n)·σ₁², so a singular value below √(ε·max(m, n))·σ₁ is not
