@@ -2993,6 +2993,7 @@ fn affine_points(meas: &Measurements, affine: &Affine) -> Mat<f64> {
 fn validate_config(c: &Config) -> Result<()> {
     c.projective.validate()?;
     c.perspective.validate()?;
+    c.sparse.lm.validate("sparse.lm")?;
     if let Some(a) = c.aspect_ratio
         && !(a.is_finite() && a > 0.0)
     {

@@ -214,9 +214,7 @@ impl PerspectiveConfig {
             }
             _ => {}
         }
-        if self.bundle.max_iterations == 0 {
-            return bad("bundle.max_iterations", "must be at least 1".into());
-        }
+        self.bundle.validate("bundle")?;
         if let Some(m) = self
             .focal_grid
             .iter()

@@ -256,6 +256,10 @@ pub struct LmConfig {
     pub absolute_tolerance: f64,
     /// Initial damping, relative to the diagonal. Default 1e-4.
     pub initial_lambda: f64,
+    /// After an accepted step whose gain ratio exceeds 0.25 (and no rejection since the
+    /// last accepted one), the damping is divided by this. Default 5.
+    #[serde(default = "default_lambda_decrease")]
+    pub lambda_decrease: f64,
     /// Damp the point blocks too (joint LM); false = variable projection. Default false.
     pub damp_points: bool,
     /// Replace the points by their optimum for the new cameras after each step (VarPro).
@@ -297,6 +301,10 @@ pub struct LmConfig {
     pub dense_schur: bool,
 }
 
+fn default_lambda_decrease() -> f64 {
+    5.0
+}
+
 fn default_dense_schur() -> bool {
     true
 }
@@ -314,6 +322,28 @@ fn default_noise_tolerance() -> f64 {
 }
 
 impl LmConfig {
+    /// A typed error naming `field` for settings the solver cannot run with: no solves,
+    /// a damping that is not positive, or a decrease that does not decrease.
+    pub fn validate(&self, field: &'static str) -> crate::Result<()> {
+        let bad = |message: String| Err(crate::Error::InvalidConfig { field, message });
+        if self.max_iterations == 0 {
+            return bad("max_iterations must be at least 1".into());
+        }
+        if !(self.initial_lambda > 0.0 && self.initial_lambda.is_finite()) {
+            return bad(format!(
+                "initial_lambda {} is not positive",
+                self.initial_lambda
+            ));
+        }
+        if !(self.lambda_decrease > 1.0 && self.lambda_decrease.is_finite()) {
+            return bad(format!(
+                "lambda_decrease {} is not above 1",
+                self.lambda_decrease
+            ));
+        }
+        Ok(())
+    }
+
     /// These settings with geodesic acceleration `alpha` where they have none
     /// (`geodesic_acceleration` = 0): for an adjustment whose start is known to leave a
     /// long, curved tail (a chain of metric windows), while an explicit setting wins.
@@ -334,6 +364,7 @@ impl Default for LmConfig {
             parameter_tolerance: 1e-12,
             absolute_tolerance: 1e-28,
             initial_lambda: 1e-4,
+            lambda_decrease: default_lambda_decrease(),
             damp_points: false,
             resolve_points: true,
             point_iterations: 10,
@@ -2204,7 +2235,7 @@ pub fn minimize_shared<M: BundleModel>(
                 cur = new_cost;
                 costs.push(cur);
                 if rho > 0.25 && !retried {
-                    lambda /= 5.0;
+                    lambda /= cfg.lambda_decrease;
                 }
                 lambda = lambda.max(lambda_floor);
                 nu = 2.0;
@@ -2296,6 +2327,46 @@ mod tests {
             pt_ptr,
             cam,
             w,
+        }
+    }
+
+    /// Settings the solver cannot run with are typed errors naming the field; the defaults
+    /// and the sparse pipeline's pass.
+    #[test]
+    fn settings_that_cannot_run_are_named() {
+        assert!(LmConfig::default().validate("lm").is_ok());
+        assert!(
+            crate::sparse::SparseConfig::default()
+                .lm
+                .validate("sparse.lm")
+                .is_ok()
+        );
+        for bad in [
+            LmConfig {
+                max_iterations: 0,
+                ..LmConfig::default()
+            },
+            LmConfig {
+                initial_lambda: 0.0,
+                ..LmConfig::default()
+            },
+            LmConfig {
+                initial_lambda: f64::NAN,
+                ..LmConfig::default()
+            },
+            LmConfig {
+                lambda_decrease: 1.0,
+                ..LmConfig::default()
+            },
+            LmConfig {
+                lambda_decrease: f64::INFINITY,
+                ..LmConfig::default()
+            },
+        ] {
+            match bad.validate("sparse.lm") {
+                Err(crate::Error::InvalidConfig { field, .. }) => assert_eq!(field, "sparse.lm"),
+                other => panic!("{bad:?}: {other:?}"),
+            }
         }
     }
 

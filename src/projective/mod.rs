@@ -148,18 +148,7 @@ impl ProjectiveConfig {
             ("projective.pose", &self.pose),
             ("projective.refine", &self.refine),
         ] {
-            if c.max_iterations == 0 {
-                return Err(Error::InvalidConfig {
-                    field,
-                    message: "max_iterations must be at least 1".into(),
-                });
-            }
-            if !(c.initial_lambda > 0.0 && c.initial_lambda.is_finite()) {
-                return Err(Error::InvalidConfig {
-                    field,
-                    message: format!("initial_lambda {} is not positive", c.initial_lambda),
-                });
-            }
+            c.validate(field)?;
         }
         Ok(())
     }
