@@ -28,6 +28,8 @@
 //!    (variable projection), the reduced camera system (6 unknowns per frame) banded for a
 //!    video and factorised by sparse Cholesky, `O(F b² 6³)` for a half-bandwidth of `b`
 //!    frames. The 7-dimensional similarity gauge is held by springs on frames 0 and 1.
+//!    Small damping from the start, and each accepted step extended along its path while
+//!    the cost keeps falling (docs/math.md §13, "Damping and extension along the path").
 //! 3. **Outlier tracks**: when the adjustment converged, a track whose RMS residual exceeds
 //!    [`SparseConfig::outlier_sigmas`] robust standard deviations of all residuals (and
 //!    [`SparseConfig::min_outlier_px`]) is rejected whole and the fit is repeated once from
@@ -106,7 +108,9 @@ pub struct SparseConfig {
     /// (10⁻⁴, divided by 5) blocked those modes until it had decayed, for 8–10 steps of
     /// little gain. Measured on the corridors of `sparse_scaling`, to the same or a lower RMS: 16 → 8
     /// solves at 5 000 frames; 20 → 13 solves (337 → 252 s) at 20 000 frames
-    /// (docs/results.md).
+    /// (docs/results.md). Each accepted step is extended along its path while the cost
+    /// keeps falling, at most 6 extra cost evaluations (`extension_trials`): Gauss–Newton
+    /// converges only linearly along those modes (docs/math.md §13).
     pub lm: LmConfig,
     /// Reject a track whose RMS residual exceeds this many robust standard deviations
     /// (1.4826 × the median absolute residual) of all residuals. Default 4. `f64::INFINITY`
@@ -146,6 +150,7 @@ impl Default for SparseConfig {
                 geodesic_acceleration: 0.75,
                 initial_lambda: 1e-8,
                 lambda_decrease: 20.0,
+                extension_trials: 6,
                 ..LmConfig::default()
             },
             outlier_sigmas: 4.0,

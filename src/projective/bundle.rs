@@ -273,6 +273,17 @@ pub struct LmConfig {
     /// Cholesky factor), when `2‖a‖ ≤ α‖δ‖`. 0 disables it. Default 0.
     #[serde(default)]
     pub geodesic_acceleration: f64,
+    /// Extension of an accepted step along its path `x(α) = x + α δ + α² a/2` (`δ` the
+    /// Gauss–Newton step, `a/2` its geodesic correction, if any): when the cost along the
+    /// path is concave at `α = 1` (it fell by more than its slope predicts) or its
+    /// parabola through `f(0)`, `f′(0)` and `f(1)` has its minimum beyond `α = 1.5`, the
+    /// step is tried at that minimum, or doubled while the cost keeps falling, at most
+    /// this many extra cost evaluations (each a point re-solve). Where Gauss–Newton
+    /// converges linearly — along soft modes whose curvature is mostly the residuals'
+    /// own, which `JᵀJ` leaves out — each step covers a small fraction of the way and
+    /// the extension takes the rest. 0 disables it. Default 0.
+    #[serde(default)]
+    pub extension_trials: usize,
     /// Convergence at the noise level: converged when the last `noise_window` accepted
     /// steps together lowered the cost by less than this many noise variances, `σ̂² = E /
     /// (#residuals − #parameters)` (a change of the cost by `σ̂²` is one unit of `χ²`: a
@@ -369,6 +380,7 @@ impl Default for LmConfig {
             resolve_points: true,
             point_iterations: 10,
             geodesic_acceleration: 0.0,
+            extension_trials: 0,
             noise_tolerance: 0.01,
             noise_window: 10,
             window_relative_tolerance: 1e-6,
@@ -583,6 +595,8 @@ pub struct LmResult {
     pub costs: Vec<f64>,
     /// Non-zeros of the reduced camera system (lower triangle), for the memory figures.
     pub schur_nnz: usize,
+    /// Accepted steps that were extended along their path (`extension_trials`).
+    pub extensions: usize,
 }
 
 /// Cost `Σ ‖r‖²` of the current parameters (per-track sums in parallel, added in track
@@ -1341,6 +1355,138 @@ fn back_substitute<'a>(
         .collect()
 }
 
+/// A step `(δc, δg, δx)` in the tangent spaces of the cameras, the shared parameters and
+/// the points.
+type Step<'s> = (&'s [f64], &'s [f64], &'s [f64]);
+
+/// Parameters `(cameras, points, shared)` being written.
+type ParamsMut<'s> = (&'s mut [f64], &'s mut [f64], &'s mut [f64]);
+
+/// The trial parameters of a step from the current ones: cameras and points moved along
+/// their tangent bases and mapped back onto their manifolds, the points then re-solved for
+/// the new cameras (variable projection) when `resolve_points`. `O(n_obs)` per trial.
+struct Stepper<'a, M: BundleModel> {
+    model: &'a M,
+    g: &'a Graph,
+    cams: &'a [f64],
+    pts: &'a [f64],
+    glob: &'a [f64],
+    cam_basis: &'a [f64],
+    cam_has_basis: &'a [bool],
+    point_iterations: usize,
+    resolve_points: bool,
+}
+
+impl<M: BundleModel> Stepper<'_, M> {
+    /// The parameters moved by `step` into `out`; returns their cost.
+    fn trial(&self, (dc, dg, dp): Step<'_>, (tc, tp, tg): ParamsMut<'_>) -> f64 {
+        let m = self.model;
+        let (cl, cd, pl, pd) = (m.cam_len(), m.cam_dim(), m.pt_len(), m.pt_dim());
+        tc.copy_from_slice(self.cams);
+        tp.copy_from_slice(self.pts);
+        tg.copy_from_slice(self.glob);
+        for (t, d) in tg.iter_mut().zip(dg) {
+            *t += d;
+        }
+        for f in 0..self.g.n_cams {
+            let c = &mut tc[f * cl..(f + 1) * cl];
+            apply(
+                c,
+                &dc[f * cd..(f + 1) * cd],
+                &self.cam_basis[f * cl * cd..(f + 1) * cl * cd],
+                self.cam_has_basis[f],
+                cl,
+                cd,
+            );
+            m.normalize_cam(c);
+        }
+        let mut pb = vec![0.0; pl * pd];
+        for p in 0..self.g.n_pts {
+            let x = &mut tp[p * pl..(p + 1) * pl];
+            let has = m.pt_basis(x, &mut pb);
+            apply(x, &dp[p * pd..(p + 1) * pd], &pb, has, pl, pd);
+            m.normalize_pt(x);
+        }
+        if self.resolve_points {
+            solve_points(m, self.g, tc, tg, tp, self.point_iterations)
+        } else {
+            cost(m, self.g, tc, tp, tg)
+        }
+    }
+
+    /// The extension of an accepted step along its path `x(α) = x + α δ + α² (δ̃ − δ)`
+    /// (`δ` = `raw`, the Gauss–Newton step; `δ̃` = `corrected`, with its geodesic correction
+    /// `a/2`), given the cost `f0` at `α = 0`, its slope there (`2 gᵀδ`) and `f1` at
+    /// `α = 1`. When the cost is concave along the path (`f1 − f0 < slope`), `α = 2, 4, …`
+    /// while the cost keeps falling; otherwise the parabola's minimum
+    /// `α* = −slope / 2(f1 − f0 − slope)` when it lies beyond 1.5. At most `trials` cost
+    /// evaluations, `α ≤ 2^trials`. Returns `(α, cost, cameras, points, shared)` of the best
+    /// trial when it beats `f1`.
+    #[allow(clippy::type_complexity)]
+    fn extend(
+        &self,
+        raw: Step<'_>,
+        corrected: Step<'_>,
+        (f0, slope, f1): (f64, f64, f64),
+        trials: usize,
+    ) -> Option<(f64, f64, Vec<f64>, Vec<f64>, Vec<f64>)> {
+        let curvature = f1 - f0 - slope;
+        if !(slope < 0.0 && curvature.is_finite()) || trials == 0 {
+            return None;
+        }
+        let concave = curvature <= 0.0;
+        let cap = 2f64.powi(trials.min(30) as i32);
+        let mut alpha = if concave {
+            2.0
+        } else {
+            (-slope / (2.0 * curvature)).min(cap)
+        };
+        if !(alpha > 1.5) {
+            return None;
+        }
+        let path = |a: f64, r: &[f64], d: &[f64]| -> Vec<f64> {
+            r.iter()
+                .zip(d)
+                .map(|(r, d)| a * r + a * a * (d - r))
+                .collect()
+        };
+        let mut work = (
+            vec![0.0; self.cams.len()],
+            vec![0.0; self.pts.len()],
+            vec![0.0; self.glob.len()],
+        );
+        let mut best: Option<(f64, f64, Vec<f64>, Vec<f64>, Vec<f64>)> = None;
+        let mut best_cost = f1;
+        for _ in 0..trials {
+            let (sc, sg, sp) = (
+                path(alpha, raw.0, corrected.0),
+                path(alpha, raw.1, corrected.1),
+                path(alpha, raw.2, corrected.2),
+            );
+            let c = self.trial((&sc, &sg, &sp), (&mut work.0, &mut work.1, &mut work.2));
+            if !(c < best_cost) {
+                break;
+            }
+            best_cost = c;
+            let (bc, bp, bg) = match best.take() {
+                Some((_, _, bc, bp, bg)) => (bc, bp, bg),
+                None => (
+                    vec![0.0; self.cams.len()],
+                    vec![0.0; self.pts.len()],
+                    vec![0.0; self.glob.len()],
+                ),
+            };
+            let (wc, wp, wg) = std::mem::replace(&mut work, (bc, bp, bg));
+            best = Some((alpha, c, wc, wp, wg));
+            if !concave || alpha >= cap {
+                break;
+            }
+            alpha *= 2.0;
+        }
+        best
+    }
+}
+
 /// What the geodesic acceleration of one damped step needs from the iteration.
 struct Accel<'a, M: BundleModel, F: Fn(usize) -> bool> {
     model: &'a M,
@@ -1670,6 +1816,7 @@ pub fn minimize_shared<M: BundleModel>(
 
     let mut lambda = cfg.initial_lambda;
     let mut nu = 2.0;
+    let mut extensions = 0;
     // Twice the largest damping at which the reduced system failed to factorize: λ is not
     // lowered below it again (a failed factorization costs as much as a solve, and on a
     // long sequence the system is indefinite by rounding below some λ ≈ 10⁻¹⁰).
@@ -2137,6 +2284,9 @@ pub fn minimize_shared<M: BundleModel>(
                     }
                 }
             }
+            // The Gauss–Newton step before its geodesic correction, kept for the extension
+            // along the step's path (`extension_trials`).
+            let raw = (cfg.extension_trials > 0).then(|| (dc.clone(), dg.clone(), dp.clone()));
             // Geodesic acceleration: `δ ← δ + a/2` when `2‖a‖ ≤ α‖δ‖`.
             let (dc, dg, dp) = if cfg.geodesic_acceleration > 0.0 {
                 let acc = Accel {
@@ -2181,52 +2331,53 @@ pub fn minimize_shared<M: BundleModel>(
                 (dc, dg, dp)
             };
             // Trial parameters.
-            trial_cams.copy_from_slice(cams);
-            trial_pts.copy_from_slice(pts);
-            trial_glob.copy_from_slice(glob);
-            let mut step2 = dg.iter().map(|v| v * v).sum::<f64>();
-            let mut par2 = glob.iter().map(|v| v * v).sum::<f64>();
-            for i in 0..k {
-                trial_glob[i] += dg[i];
-            }
-            for f in 0..nf {
-                let c = &mut trial_cams[f * cl..(f + 1) * cl];
-                par2 += c.iter().map(|v| v * v).sum::<f64>();
-                let d = &dc[f * cd..(f + 1) * cd];
-                step2 += d.iter().map(|v| v * v).sum::<f64>();
-                apply(
-                    c,
-                    d,
-                    &cam_basis[f * cl * cd..(f + 1) * cl * cd],
-                    cam_has_basis[f],
-                    cl,
-                    cd,
-                );
-                model.normalize_cam(c);
-            }
-            let mut pb = vec![0.0; pl * pd];
-            for p in 0..np {
-                let x = &mut trial_pts[p * pl..(p + 1) * pl];
-                par2 += x.iter().map(|v| v * v).sum::<f64>();
-                let d = &dp[p * pd..(p + 1) * pd];
-                step2 += d.iter().map(|v| v * v).sum::<f64>();
-                let has = model.pt_basis(x, &mut pb);
-                apply(x, d, &pb, has, pl, pd);
-                model.normalize_pt(x);
-            }
-            let new_cost = if cfg.resolve_points {
-                solve_points(
-                    model,
-                    g,
-                    &trial_cams,
-                    &trial_glob,
-                    &mut trial_pts,
-                    cfg.point_iterations,
-                )
-            } else {
-                cost(model, g, &trial_cams, &trial_pts, &trial_glob)
+            let mut step2 = dg.iter().chain(&dc).chain(&dp).map(|v| v * v).sum::<f64>();
+            let par2 = glob
+                .iter()
+                .chain(&*cams)
+                .chain(&*pts)
+                .map(|v| v * v)
+                .sum::<f64>();
+            let stepper = Stepper {
+                model,
+                g,
+                cams,
+                pts,
+                glob,
+                cam_basis: &cam_basis,
+                cam_has_basis: &cam_has_basis,
+                point_iterations: cfg.point_iterations,
+                resolve_points: cfg.resolve_points,
             };
+            let mut new_cost = stepper.trial(
+                (&dc, &dg, &dp),
+                (&mut trial_cams, &mut trial_pts, &mut trial_glob),
+            );
+            // The gain ratio of the damped step itself (the damping follows it).
             let rho = (cur - new_cost) / pred.max(f64::MIN_POSITIVE);
+            // Extension along the step's path while the cost keeps falling.
+            if let Some((rc, rg, rp)) = raw.as_ref()
+                && new_cost.is_finite()
+                && new_cost < cur
+            {
+                let slope = 2.0
+                    * (gc.iter().zip(rc).map(|(a, b)| a * b).sum::<f64>()
+                        + gglob.iter().zip(rg).map(|(a, b)| a * b).sum::<f64>());
+                let ext = stepper.extend(
+                    (rc, rg, rp),
+                    (&dc, &dg, &dp),
+                    (cur, slope, new_cost),
+                    cfg.extension_trials,
+                );
+                if let Some((alpha, c, tc, tp, tg)) = ext {
+                    trial_cams.copy_from_slice(&tc);
+                    trial_pts.copy_from_slice(&tp);
+                    trial_glob.copy_from_slice(&tg);
+                    new_cost = c;
+                    step2 *= alpha * alpha;
+                    extensions += 1;
+                }
+            }
             if new_cost.is_finite() && new_cost < cur {
                 let rel = (cur - new_cost) / cur;
                 cams.copy_from_slice(&trial_cams);
@@ -2298,6 +2449,7 @@ pub fn minimize_shared<M: BundleModel>(
         },
         costs,
         schur_nnz: pattern.nnz(),
+        extensions,
     })
 }
 
