@@ -271,6 +271,11 @@ impl BundleModel for ScaledOrthographic {
         }
     }
 
+    /// `s R₁₂ (x − c) + t − w` is affine in `x`.
+    fn points_linear(&self) -> bool {
+        true
+    }
+
     fn cam_basis(&self, cam: &[f64], out: &mut [f64]) -> bool {
         let d = self.cam_dim();
         out[..self.cam_len() * d].fill(0.0);
@@ -1116,6 +1121,75 @@ pub fn fit(
 mod tests {
     use super::*;
     use crate::synth::{CorridorConfig, corridor};
+
+    /// The points' one-solve optimum (`points_linear`) is the damped iterations' optimum:
+    /// on a corridor's start, with the points moved off, both re-solves give the same
+    /// points and cost (the damped ones to their own tolerance).
+    #[test]
+    fn linear_point_solve_matches_the_damped_iterations() {
+        struct Damped(ScaledOrthographic);
+        impl BundleModel for Damped {
+            fn cam_len(&self) -> usize {
+                self.0.cam_len()
+            }
+            fn cam_dim(&self) -> usize {
+                self.0.cam_dim()
+            }
+            fn pt_len(&self) -> usize {
+                3
+            }
+            fn pt_dim(&self) -> usize {
+                3
+            }
+            fn res_dim(&self) -> usize {
+                2
+            }
+            fn eval(
+                &self,
+                c: &[f64],
+                x: &[f64],
+                glob: &[f64],
+                w: [f64; 2],
+                r: &mut [f64],
+                jac: Option<Jacobians<'_>>,
+            ) {
+                self.0.eval(c, x, glob, w, r, jac)
+            }
+        }
+        let (table, _) = corridor(&CorridorConfig {
+            frames: 60,
+            ..CorridorConfig::default()
+        })
+        .unwrap();
+        let prob = SparseProblem::new(&table, true);
+        let (cams, mut pts, _) = prob
+            .start(&SparseConfig::default(), CameraModel::ScaledOrthographic)
+            .unwrap();
+        for (i, v) in pts.iter_mut().enumerate() {
+            *v += 0.05 * ((i * 7919 % 13) as f64 - 6.0);
+        }
+        let model = ScaledOrthographic {
+            scaled: true,
+            pivoted: false,
+        };
+        assert!(model.points_linear());
+        let g = &prob.graph;
+        let (mut a, mut b) = (pts.clone(), pts.clone());
+        let ca = bundle::solve_points(&model, g, &cams, &[], &mut a, 10);
+        let cb = bundle::solve_points(&Damped(model), g, &cams, &[], &mut b, 10);
+        assert!((ca - cb).abs() <= 1e-10 * cb, "{ca} vs {cb}");
+        assert!(ca <= cb * (1.0 + 1e-12), "{ca} vs {cb}");
+        let spread = (pts.iter().map(|v| v * v).sum::<f64>() / pts.len() as f64).sqrt();
+        let worst = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            worst <= 1e-6 * spread,
+            "points differ by {worst} (spread {spread})"
+        );
+    }
 
     /// A window left in a local minimum (its completion stopped after one iteration from a
     /// random start) is found by its RMS against the other windows' and completed again to

@@ -152,6 +152,12 @@ pub trait BundleModel: Sync {
     fn gauge_pins(&self, _cams: &[f64], _n_cams: usize) -> Vec<(usize, Vec<Vec<f64>>)> {
         Vec::new()
     }
+    /// Whether the residuals are affine in a point's tangent coordinates (for fixed
+    /// cameras) with the identity as the point's basis — a point's optimum is then one
+    /// linear least-squares solve, which [`solve_points`] takes directly. Default false.
+    fn points_linear(&self) -> bool {
+        false
+    }
 }
 
 /// The Jacobians [`BundleModel::eval`] fills (row-major, stored-parameter space).
@@ -661,6 +667,70 @@ pub fn solve_points<M: BundleModel>(
         .sum()
 }
 
+/// A point whose residuals are affine in it ([`BundleModel::points_linear`]): its optimum
+/// `x + (Σ J_xᵀ J_x)⁻¹ (−Σ J_xᵀ r)` by one Cholesky solve, and its cost there; `None` (and
+/// `x` untouched) when the normal matrix is not positive definite, left to the damped
+/// iterations. Two passes over the track's observations.
+fn solve_linear_point<M: BundleModel>(
+    model: &M,
+    g: &Graph,
+    cams: &[f64],
+    glob: &[f64],
+    x: &mut [f64],
+    p: usize,
+) -> Option<f64> {
+    let (cl, pl, m) = (model.cam_len(), model.pt_len(), model.res_dim());
+    let mut r = vec![0.0; m];
+    let mut jc = vec![0.0; m * cl];
+    let mut jp = vec![0.0; m * pl];
+    let mut jg = vec![0.0; m * model.glob_len()];
+    let mut a = vec![0.0; pl * pl];
+    let mut b = vec![0.0; pl];
+    for o in g.track(p) {
+        let f = g.cam[o];
+        model.eval(
+            &cams[f * cl..(f + 1) * cl],
+            x,
+            glob,
+            g.w[o],
+            &mut r,
+            Some(Jacobians {
+                cam: &mut jc,
+                pt: &mut jp,
+                glob: &mut jg,
+            }),
+        );
+        for i in 0..m {
+            let row = &jp[i * pl..(i + 1) * pl];
+            for a1 in 0..pl {
+                b[a1] -= row[a1] * r[i];
+                for a2 in 0..=a1 {
+                    a[a1 * pl + a2] += row[a1] * row[a2];
+                }
+            }
+        }
+    }
+    let mean_diag = (0..pl).map(|i| a[i * pl + i]).sum::<f64>() / pl as f64;
+    for i in 0..pl {
+        for j in 0..i {
+            a[j * pl + i] = a[i * pl + j];
+        }
+        a[i * pl + i] += 1e-15 * mean_diag;
+    }
+    if !(mean_diag > 0.0 && mean_diag.is_finite() && linalg::cholesky(&mut a, pl)) {
+        return None;
+    }
+    linalg::chol_solve(&a, pl, &mut b);
+    if !b.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    for (xi, d) in x.iter_mut().zip(&b) {
+        *xi += d;
+    }
+    model.normalize_pt(x);
+    Some(track_cost(model, g, cams, glob, x, p))
+}
+
 /// One track's point optimum for fixed cameras; returns its cost.
 fn solve_point<M: BundleModel>(
     model: &M,
@@ -683,6 +753,11 @@ fn solve_point<M: BundleModel>(
     let mut jg = vec![0.0; m * model.glob_len()];
     let mut basis = vec![0.0; pl * pd];
     let mut jt = vec![0.0; m * pd];
+    if model.points_linear()
+        && let Some(c) = solve_linear_point(model, g, cams, glob, x, p)
+    {
+        return c;
+    }
     let mut cost = track_cost(model, g, cams, glob, x, p);
     let mut lambda = 1e-6;
     let mut trial = x.to_vec();
