@@ -3554,6 +3554,7 @@ fn sparse_reconstruction(
             iterations: fit.report.iterations,
             rms_px: fit.rms_px,
             schur_nonzeros: fit.schur_nonzeros,
+            extensions: fit.extensions,
             rounds: fit.rounds,
             skipped_windows: fit.skipped_windows,
             seconds,

@@ -176,6 +176,9 @@ pub struct SparseReport {
     pub rms_px: f64,
     /// Non-zeros of the reduced camera system (lower triangle).
     pub schur_nonzeros: usize,
+    /// Of `iterations`, the accepted steps extended along their path
+    /// (`LmConfig::extension_trials`).
+    pub extensions: usize,
     /// Rounds of fit + outlier rejection (1 or 2).
     pub rounds: usize,
     /// Windows of the start that did not fit and were skipped.
@@ -1014,6 +1017,8 @@ pub struct SparseFit {
     pub sigma_px: f64,
     pub threshold_px: f64,
     pub schur_nonzeros: usize,
+    /// Accepted steps of the final round's adjustment extended along their path.
+    pub extensions: usize,
     pub rounds: usize,
     /// Windows of the start that did not fit and were skipped.
     pub skipped_windows: usize,
@@ -1081,6 +1086,7 @@ pub fn fit(
                 sigma_px: sigma,
                 threshold_px: threshold,
                 schur_nonzeros: lm.schur_nnz,
+                extensions: lm.extensions,
                 rounds: 1,
                 skipped_windows,
                 note,
@@ -1110,6 +1116,7 @@ pub fn fit(
             sigma_px: sigma,
             threshold_px: threshold,
             schur_nonzeros: lm2.schur_nnz,
+            extensions: lm2.extensions,
             rounds: 2,
             skipped_windows,
             note: None,

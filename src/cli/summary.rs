@@ -88,7 +88,8 @@ pub fn print_report(rec: &Reconstruction) {
     if let Some(s) = &rec.sparse {
         detail!(
             "sparse pipeline: {}; {} observations, {} round(s), {} window(s) skipped, \
-             affine RMS {:.6} px, {} after {} iterations, {} Schur non-zeros, {:.2} s",
+             affine RMS {:.6} px, {} after {} iterations ({} extended), {} Schur non-zeros, \
+             {:.2} s",
             s.reason,
             s.observations,
             s.rounds,
@@ -96,6 +97,7 @@ pub fn print_report(rec: &Reconstruction) {
             s.rms_px,
             spelled(&s.status),
             s.iterations,
+            s.extensions,
             s.schur_nonzeros,
             s.seconds
         );
