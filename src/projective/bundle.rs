@@ -667,25 +667,34 @@ pub fn solve_points<M: BundleModel>(
         .sum()
 }
 
-/// A point whose residuals are affine in it ([`BundleModel::points_linear`]): its optimum
-/// `x + (Σ J_xᵀ J_x)⁻¹ (−Σ J_xᵀ r)` by one Cholesky solve, and its cost there; `None` (and
-/// `x` untouched) when the normal matrix is not positive definite, left to the damped
-/// iterations. Two passes over the track's observations.
-fn solve_linear_point<M: BundleModel>(
+/// The Gauss–Newton normal equations of track `p`'s point for fixed cameras, in its tangent
+/// space (`basis`, `pt_len × pt_dim`, when `has_basis`; else the stored coordinates):
+/// `A = Σ J_tᵀ J_t` (lower triangle filled, row-major `pt_dim × pt_dim`) and `b = −Σ J_tᵀ r`.
+/// One pass over the track's observations.
+#[allow(clippy::too_many_arguments)]
+fn point_normal_equations<M: BundleModel>(
     model: &M,
     g: &Graph,
     cams: &[f64],
     glob: &[f64],
-    x: &mut [f64],
+    x: &[f64],
     p: usize,
-) -> Option<f64> {
-    let (cl, pl, m) = (model.cam_len(), model.pt_len(), model.res_dim());
+    basis: &[f64],
+    has_basis: bool,
+) -> (Vec<f64>, Vec<f64>) {
+    let (cl, pl, pd, m) = (
+        model.cam_len(),
+        model.pt_len(),
+        model.pt_dim(),
+        model.res_dim(),
+    );
     let mut r = vec![0.0; m];
     let mut jc = vec![0.0; m * cl];
     let mut jp = vec![0.0; m * pl];
     let mut jg = vec![0.0; m * model.glob_len()];
-    let mut a = vec![0.0; pl * pl];
-    let mut b = vec![0.0; pl];
+    let mut jt = vec![0.0; m * pd];
+    let mut a = vec![0.0; pd * pd];
+    let mut b = vec![0.0; pd];
     for o in g.track(p) {
         let f = g.cam[o];
         model.eval(
@@ -700,16 +709,37 @@ fn solve_linear_point<M: BundleModel>(
                 glob: &mut jg,
             }),
         );
+        tangent(&jp, basis, has_basis, m, pl, pd, &mut jt);
         for i in 0..m {
-            let row = &jp[i * pl..(i + 1) * pl];
-            for a1 in 0..pl {
+            let row = &jt[i * pd..(i + 1) * pd];
+            for a1 in 0..pd {
                 b[a1] -= row[a1] * r[i];
                 for a2 in 0..=a1 {
-                    a[a1 * pl + a2] += row[a1] * row[a2];
+                    a[a1 * pd + a2] += row[a1] * row[a2];
                 }
             }
         }
     }
+    (a, b)
+}
+
+/// A point whose residuals are affine in it ([`BundleModel::points_linear`]): its optimum
+/// `x + (Σ J_xᵀ J_x)⁻¹ (−Σ J_xᵀ r)` by one Cholesky solve, and its cost there; `None` (and
+/// `x` untouched) when the normal matrix is not positive definite, left to the damped
+/// iterations. Two passes over the track's observations.
+fn solve_linear_point<M: BundleModel>(
+    model: &M,
+    g: &Graph,
+    cams: &[f64],
+    glob: &[f64],
+    x: &mut [f64],
+    p: usize,
+) -> Option<f64> {
+    let pl = model.pt_len();
+    if model.pt_dim() != pl {
+        return None;
+    }
+    let (mut a, mut b) = point_normal_equations(model, g, cams, glob, x, p, &[], false);
     let mean_diag = (0..pl).map(|i| a[i * pl + i]).sum::<f64>() / pl as f64;
     for i in 0..pl {
         for j in 0..i {
@@ -741,23 +771,13 @@ fn solve_point<M: BundleModel>(
     p: usize,
     iterations: usize,
 ) -> f64 {
-    let (cl, pl, pd, m) = (
-        model.cam_len(),
-        model.pt_len(),
-        model.pt_dim(),
-        model.res_dim(),
-    );
-    let mut r = vec![0.0; m];
-    let mut jc = vec![0.0; m * cl];
-    let mut jp = vec![0.0; m * pl];
-    let mut jg = vec![0.0; m * model.glob_len()];
-    let mut basis = vec![0.0; pl * pd];
-    let mut jt = vec![0.0; m * pd];
+    let (pl, pd) = (model.pt_len(), model.pt_dim());
     if model.points_linear()
         && let Some(c) = solve_linear_point(model, g, cams, glob, x, p)
     {
         return c;
     }
+    let mut basis = vec![0.0; pl * pd];
     let mut cost = track_cost(model, g, cams, glob, x, p);
     let mut lambda = 1e-6;
     let mut trial = x.to_vec();
@@ -765,33 +785,7 @@ fn solve_point<M: BundleModel>(
     while it < iterations {
         it += 1;
         let has_basis = model.pt_basis(x, &mut basis);
-        let mut a = vec![0.0; pd * pd];
-        let mut b = vec![0.0; pd];
-        for o in g.track(p) {
-            let f = g.cam[o];
-            model.eval(
-                &cams[f * cl..(f + 1) * cl],
-                x,
-                glob,
-                g.w[o],
-                &mut r,
-                Some(Jacobians {
-                    cam: &mut jc,
-                    pt: &mut jp,
-                    glob: &mut jg,
-                }),
-            );
-            tangent(&jp, &basis, has_basis, m, pl, pd, &mut jt);
-            for i in 0..m {
-                let row = &jt[i * pd..(i + 1) * pd];
-                for a1 in 0..pd {
-                    b[a1] -= row[a1] * r[i];
-                    for a2 in 0..=a1 {
-                        a[a1 * pd + a2] += row[a1] * row[a2];
-                    }
-                }
-            }
-        }
+        let (a, b) = point_normal_equations(model, g, cams, glob, x, p, &basis, has_basis);
         let gnorm = b.iter().map(|v| v * v).sum::<f64>().sqrt();
         if gnorm == 0.0 || !gnorm.is_finite() {
             break;
