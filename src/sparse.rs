@@ -106,8 +106,8 @@ pub struct SparseConfig {
     /// is every window at its own optimum, so what is left is the chain's long-range
     /// bending, whose curvature is 10⁻⁸ of the diagonal and less; the default damping
     /// (10⁻⁴, divided by 5) blocked those modes until it had decayed, for 8–10 steps of
-    /// little gain. Measured on the corridors of `sparse_scaling`, to the same or a lower RMS: 16 → 8
-    /// solves at 5 000 frames; 20 → 13 solves (337 → 252 s) at 20 000 frames
+    /// little gain. Measured on the corridors of `sparse_scaling`, to the same or a lower
+    /// RMS: 16 → 8 solves at 5 000 frames; 20 → 13 solves (337 → 252 s) at 20 000 frames
     /// (docs/results.md). Each accepted step is extended along its path while the cost
     /// keeps falling, at most 6 extra cost evaluations (`extension_trials`): Gauss–Newton
     /// converges only linearly along those modes (docs/math.md §13).

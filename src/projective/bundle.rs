@@ -1486,19 +1486,19 @@ impl<M: BundleModel> Stepper<'_, M> {
     /// The extension of an accepted step along its path `x(α) = x + α δ + α² (δ̃ − δ)`
     /// (`δ` = `raw`, the Gauss–Newton step; `δ̃` = `corrected`, with its geodesic correction
     /// `a/2`), given the cost `f0` at `α = 0`, its slope there (`2 gᵀδ`) and `f1` at
-    /// `α = 1`. When the cost is concave along the path (`f1 − f0 < slope`), `α = 2, 4, …`
-    /// while the cost keeps falling; otherwise the parabola's minimum
-    /// `α* = −slope / 2(f1 − f0 − slope)` when it lies beyond 1.5. At most `trials` cost
-    /// evaluations, `α ≤ 2^trials`. Returns `(α, cost, cameras, points, shared)` of the best
-    /// trial when it beats `f1`.
-    #[allow(clippy::type_complexity)]
+    /// `α = 1`, whose parameters `best` holds. When the cost is concave along the path
+    /// (`f1 − f0 < slope`), `α = 2, 4, …` while the cost keeps falling; otherwise the
+    /// parabola's minimum `α* = −slope / 2(f1 − f0 − slope)` when it lies beyond 1.5. At
+    /// most `trials` cost evaluations, `α ≤ 2^trials`. When a trial beats `f1`, `best` holds
+    /// the best one's parameters and `(α, cost)` is returned.
     fn extend(
         &self,
         raw: Step<'_>,
         corrected: Step<'_>,
         (f0, slope, f1): (f64, f64, f64),
         trials: usize,
-    ) -> Option<(f64, f64, Vec<f64>, Vec<f64>, Vec<f64>)> {
+        best: ParamsMut<'_>,
+    ) -> Option<(f64, f64)> {
         let curvature = f1 - f0 - slope;
         if !(slope < 0.0 && curvature.is_finite()) || trials == 0 {
             return None;
@@ -1524,7 +1524,7 @@ impl<M: BundleModel> Stepper<'_, M> {
             vec![0.0; self.pts.len()],
             vec![0.0; self.glob.len()],
         );
-        let mut best: Option<(f64, f64, Vec<f64>, Vec<f64>, Vec<f64>)> = None;
+        let mut found = None;
         let mut best_cost = f1;
         for _ in 0..trials {
             let (sc, sg, sp) = (
@@ -1537,22 +1537,16 @@ impl<M: BundleModel> Stepper<'_, M> {
                 break;
             }
             best_cost = c;
-            let (bc, bp, bg) = match best.take() {
-                Some((_, _, bc, bp, bg)) => (bc, bp, bg),
-                None => (
-                    vec![0.0; self.cams.len()],
-                    vec![0.0; self.pts.len()],
-                    vec![0.0; self.glob.len()],
-                ),
-            };
-            let (wc, wp, wg) = std::mem::replace(&mut work, (bc, bp, bg));
-            best = Some((alpha, c, wc, wp, wg));
+            best.0.swap_with_slice(&mut work.0);
+            best.1.swap_with_slice(&mut work.1);
+            best.2.swap_with_slice(&mut work.2);
+            found = Some((alpha, c));
             if !concave || alpha >= cap {
                 break;
             }
             alpha *= 2.0;
         }
-        best
+        found
     }
 }
 
@@ -2437,11 +2431,9 @@ pub fn minimize_shared<M: BundleModel>(
                     (&dc, &dg, &dp),
                     (cur, slope, new_cost),
                     cfg.extension_trials,
+                    (&mut trial_cams, &mut trial_pts, &mut trial_glob),
                 );
-                if let Some((alpha, c, tc, tp, tg)) = ext {
-                    trial_cams.copy_from_slice(&tc);
-                    trial_pts.copy_from_slice(&tp);
-                    trial_glob.copy_from_slice(&tg);
+                if let Some((alpha, c)) = ext {
                     new_cost = c;
                     step2 *= alpha * alpha;
                     extensions += 1;
