@@ -1192,6 +1192,49 @@ pub fn complete(
     cfg: &CompletionConfig,
     observer: &mut dyn Observer,
 ) -> Result<Completion> {
+    complete_impl(meas, cfg, None, observer)
+}
+
+/// [`complete`] with its first run started at the given cameras `m0` (2F×r) and
+/// translations `t0` (length 2F; ignored by the free model) instead of `cfg.init`: a warm
+/// start, e.g. from a neighbouring, overlapping problem already solved. Further runs
+/// (`runs > 1`) start at random. The start need not be normalized (orthonormal `M`);
+/// the solver's gauge handling does that.
+///
+/// Errors: those of [`complete`], and [`Error::InvalidConfig`] (field `start`) when the
+/// start's shape does not match the measurements or it is not finite.
+pub fn complete_with_start(
+    meas: &Measurements,
+    cfg: &CompletionConfig,
+    m0: MatRef<'_, f64>,
+    t0: &[f64],
+    observer: &mut dyn Observer,
+) -> Result<Completion> {
+    let rows = 2 * meas.n_frames();
+    let finite = (0..m0.ncols()).all(|c| (0..m0.nrows()).all(|r| m0[(r, c)].is_finite()))
+        && t0.iter().all(|v| v.is_finite());
+    if m0.nrows() != rows || m0.ncols() != cfg.model.rank() || t0.len() != rows || !finite {
+        return Err(Error::InvalidConfig {
+            field: "start",
+            message: format!(
+                "the start must be finite, {rows}×{} cameras and {rows} translations; got \
+                 {}×{} and {}",
+                cfg.model.rank(),
+                m0.nrows(),
+                m0.ncols(),
+                t0.len()
+            ),
+        });
+    }
+    complete_impl(meas, cfg, Some((m0, t0)), observer)
+}
+
+fn complete_impl(
+    meas: &Measurements,
+    cfg: &CompletionConfig,
+    given: Option<(MatRef<'_, f64>, &[f64])>,
+    observer: &mut dyn Observer,
+) -> Result<Completion> {
     cfg.validate()?;
     let problem = match CompletionProblem::new_with_culprit(meas, cfg.model) {
         Ok(p) => p,
@@ -1234,8 +1277,9 @@ pub fn complete(
     let mut best: Option<(usize, Vec<f64>, f64)> = None;
     for run in 0..cfg.runs {
         let start = Instant::now();
-        let (m0, t0) = match (cfg.init, run) {
-            (Init::Auto, 0) => problem.auto_start(cfg.impute_iterations)?,
+        let (m0, t0) = match (given, cfg.init, run) {
+            (Some((m, t)), _, 0) => (m.to_owned(), t.to_vec()),
+            (None, Init::Auto, 0) => problem.auto_start(cfg.impute_iterations)?,
             _ => {
                 let mut rng = StdRng::seed_from_u64(run_seed(cfg.seed, run));
                 problem.random_start(&mut rng)

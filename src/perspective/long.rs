@@ -509,6 +509,7 @@ fn fit_window(
         &w.meas,
         windows,
         crate::CameraModel::ScaledOrthographic,
+        None,
     )?;
     let fitted;
     let proj = match own {

@@ -128,7 +128,7 @@ pub fn affine_start(g: &Graph, cfg: &WindowConfig) -> Result<(Vec<f64>, Vec<f64>
     let mut placed_n = vec![0; np];
     let mut first = true;
     for_each_window(g, cfg, |start, end, tracks, meas| {
-        let c = complete_window(start, end, tracks, meas, cfg)?;
+        let c = complete_window(start, end, tracks, meas, cfg, None)?;
         let seen = seen_in_window(meas, tracks.len());
         // Map into the global frame: X_glob = A X + b.
         let (a, b) = if first {
@@ -819,7 +819,7 @@ pub(crate) fn fit_window(
     cfg: &WindowConfig,
     pcfg: &super::ProjectiveConfig,
 ) -> Result<super::ProjectiveFit> {
-    let c = complete_window(start, end, tracks, meas, cfg)?;
+    let c = complete_window(start, end, tracks, meas, cfg, None)?;
     super::fit(
         meas,
         super::AffineStart {
@@ -1122,13 +1122,105 @@ pub(crate) fn complete_window(
     tracks: &[usize],
     meas: &Measurements,
     cfg: &WindowConfig,
+    warm: Option<&(Mat<f64>, Vec<f64>)>,
 ) -> Result<completion::Completion> {
-    completion::complete(meas, &cfg.completion, &mut NoopObserver).map_err(|e| {
+    let done = match warm {
+        Some((m, t)) => {
+            completion::complete_with_start(meas, &cfg.completion, m.as_ref(), t, &mut NoopObserver)
+        }
+        None => completion::complete(meas, &cfg.completion, &mut NoopObserver),
+    };
+    done.map_err(|e| {
         Error::Degenerate(format!(
             "window of frames {start}..{end} ({} tracks) cannot be factorized: {e}",
             tracks.len()
         ))
     })
+}
+
+/// A warm start for window `next`'s affine completion from the overlapping window `prev`
+/// already completed (`prev_fit`): the cameras `[M t]` of the frames both windows hold are
+/// `prev_fit`'s rows; each frame new to `next` is resected by linear least squares,
+/// `min Σ_p ‖[M_f t_f] [s_p; 1] − w_fp‖²` over the tracks it sees whose points `s_p`
+/// `prev_fit` holds. `None` (start cold) when the windows do not overlap, the model is not
+/// affine, or a new frame sees fewer than `min_tracks` such tracks (or they are
+/// degenerate). Cost: `O(n_obs(next) · r²)` plus a sort of `prev`'s tracks.
+pub(crate) fn warm_start(
+    prev: &Window,
+    prev_fit: &completion::Completion,
+    next: &Window,
+    min_tracks: usize,
+) -> Option<(Mat<f64>, Vec<f64>)> {
+    let (sa, ea, ta, _) = prev;
+    let (sb, eb, tb, mb) = next;
+    let (sa, ea, sb, eb) = (*sa, *ea, *sb, *eb);
+    if !prev_fit.model.is_affine() || sb < sa || sb >= ea {
+        return None;
+    }
+    let r = prev_fit.m.ncols();
+    let mut index: Vec<(usize, usize)> = ta.iter().enumerate().map(|(k, &p)| (p, k)).collect();
+    index.sort_unstable();
+    let known: Vec<Option<usize>> = tb
+        .iter()
+        .map(|&p| {
+            let i = index.binary_search_by_key(&p, |e| e.0).ok()?;
+            Some(index[i].1)
+        })
+        .collect();
+    let (nb, nt) = (eb - sb, tb.len());
+    let mut m = Mat::<f64>::zeros(2 * nb, r);
+    let mut t = vec![0.0; 2 * nb];
+    for lf in 0..nb {
+        let f = sb + lf;
+        if f < ea {
+            for k in 0..2 {
+                let row = 2 * (f - sa) + k;
+                for c in 0..r {
+                    m[(2 * lf + k, c)] = prev_fit.m[(row, c)];
+                }
+                t[2 * lf + k] = prev_fit.t[row];
+            }
+            continue;
+        }
+        let mut a = nalgebra::DMatrix::<f64>::zeros(r + 1, r + 1);
+        let mut b = nalgebra::DMatrix::<f64>::zeros(r + 1, 2);
+        let mut n = 0;
+        for (k, ka) in known.iter().enumerate() {
+            let Some(ka) = *ka else { continue };
+            if !mb.visible[lf * nt + k] {
+                continue;
+            }
+            let x =
+                nalgebra::DVector::from_fn(
+                    r + 1,
+                    |c, _| {
+                        if c < r { prev_fit.s[(c, ka)] } else { 1.0 }
+                    },
+                );
+            a += &x * x.transpose();
+            for j in 0..2 {
+                let w = mb.w[(2 * lf + j, k)];
+                for c in 0..=r {
+                    b[(c, j)] += x[c] * w;
+                }
+            }
+            n += 1;
+        }
+        if n < min_tracks.max(r + 1) {
+            return None;
+        }
+        let sol = a.cholesky()?.solve(&b);
+        if sol.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        for j in 0..2 {
+            for c in 0..r {
+                m[(2 * lf + j, c)] = sol[(c, j)];
+            }
+            t[2 * lf + j] = sol[(r, j)];
+        }
+    }
+    Some((m, t))
 }
 
 /// Every window of [`for_each_window`], collected — `(start, end, tracks, measurements)` —
