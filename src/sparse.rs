@@ -79,7 +79,7 @@ pub enum Pipeline {
     /// Sparse when the dense `2F×N` matrix exceeds both
     /// [`crate::budget::DENSE_TABLE_BYTES`] and [`crate::budget::DENSE_TABLE_FACTOR`] times
     /// the observations' own size, or when the table is a long sequence of short tracks
-    /// (≥ 120 frames, < 25 % filled) and the camera is not projective or perspective;
+    /// (≥ 60 frames, < 25 % filled) and the camera is not perspective;
     /// dense otherwise (the default).
     #[default]
     Auto,
