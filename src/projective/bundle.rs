@@ -1351,14 +1351,48 @@ fn tangent(
         out[..m * d].copy_from_slice(&j[..m * d]);
         return;
     }
-    for i in 0..m {
-        for c in 0..d {
-            let mut s = 0.0;
-            for k in 0..n {
-                s += j[i * n + k] * basis[k * d + c];
+    // The models' shapes with sizes known at compile time (unrolled and vectorized; the
+    // sums run in the same order, so the results are the same bits): the pivoted scaled
+    // orthographic camera, the metric perspective camera (shared and per-frame focal
+    // length), the projective camera and point.
+    match (m, n, d) {
+        (2, 15, 6) => tangent_fixed::<2, 15, 6>(j, basis, out),
+        (2, 12, 6) => tangent_fixed::<2, 12, 6>(j, basis, out),
+        (2, 13, 7) => tangent_fixed::<2, 13, 7>(j, basis, out),
+        (2, 12, 11) => tangent_fixed::<2, 12, 11>(j, basis, out),
+        (2, 4, 3) => tangent_fixed::<2, 4, 3>(j, basis, out),
+        _ => {
+            for i in 0..m {
+                for c in 0..d {
+                    let mut s = 0.0;
+                    for k in 0..n {
+                        s += j[i * n + k] * basis[k * d + c];
+                    }
+                    out[i * d + c] = s;
+                }
             }
-            out[i * d + c] = s;
         }
+    }
+}
+
+/// [`tangent`] for an `M × N` Jacobian and an `N × D` basis.
+#[inline(always)]
+fn tangent_fixed<const M: usize, const N: usize, const D: usize>(
+    j: &[f64],
+    basis: &[f64],
+    out: &mut [f64],
+) {
+    let (j, basis, out) = (&j[..M * N], &basis[..N * D], &mut out[..M * D]);
+    for i in 0..M {
+        let mut acc = [0.0; D];
+        for k in 0..N {
+            let a = j[i * N + k];
+            let row = &basis[k * D..k * D + D];
+            for c in 0..D {
+                acc[c] += a * row[c];
+            }
+        }
+        out[i * D..i * D + D].copy_from_slice(&acc);
     }
 }
 
