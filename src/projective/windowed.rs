@@ -1257,11 +1257,6 @@ pub(crate) fn for_each_window(
     }
     let (nf, np) = (g.n_cams, g.n_pts);
     let (fptr, ftracks) = g.by_camera();
-    let obs_of = |f: usize, p: usize| -> Option<usize> {
-        let r = g.track(p);
-        let k = g.cam[r.clone()].binary_search(&f).ok()?;
-        Some(r.start + k)
-    };
     let stride = cfg.window - cfg.overlap;
     let mut local = vec![usize::MAX; np];
     let mut start = 0;
@@ -1285,12 +1280,17 @@ pub(crate) fn for_each_window(
         let mut w = Mat::<f64>::zeros(2 * nw, tracks.len());
         let mut vis = vec![false; nw * tracks.len()];
         for (k, &p) in tracks.iter().enumerate() {
-            for f in start..end {
-                if let Some(o) = obs_of(f, p) {
-                    w[(2 * (f - start), k)] = g.w[o][0];
-                    w[(2 * (f - start) + 1, k)] = g.w[o][1];
-                    vis[(f - start) * tracks.len() + k] = true;
+            // The track's frames are sorted: find the window's first, then walk.
+            let r = g.track(p);
+            let first = r.start + g.cam[r.clone()].partition_point(|&f| f < start);
+            for o in first..r.end {
+                let f = g.cam[o];
+                if f >= end {
+                    break;
                 }
+                w[(2 * (f - start), k)] = g.w[o][0];
+                w[(2 * (f - start) + 1, k)] = g.w[o][1];
+                vis[(f - start) * tracks.len() + k] = true;
             }
         }
         each(start, end, &tracks, &Measurements::new(w, vis))?;
