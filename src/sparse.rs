@@ -1258,11 +1258,8 @@ mod tests {
         );
     }
 
-    /// A window left in a local minimum (its completion stopped after one iteration from a
-    /// random start) is found by its RMS against the other windows' and completed again to
-    /// their level; the windows at their optimum are kept as they are.
     /// A window started from the window before it (the shared frames' cameras as they are,
-    /// the new frames resected from its points) starts at the noise level and reaches the
+    /// the new frames resected from its points) starts near the noise level and reaches the
     /// optimum of its cold, data-driven start in fewer iterations; windows that do not
     /// overlap give no warm start.
     #[test]
@@ -1309,6 +1306,9 @@ mod tests {
         assert!(windowed::warm_start(&windows[0], &first, &windows[3], WARM_MIN_TRACKS).is_none());
     }
 
+    /// A window left in a local minimum (its completion stopped after one iteration from a
+    /// random start) is found by its RMS against the other windows' and completed again to
+    /// their level; the windows at their optimum are kept as they are.
     #[test]
     fn a_window_in_a_local_minimum_is_completed_again() {
         let (table, _) = corridor(&CorridorConfig {

@@ -1144,7 +1144,8 @@ pub(crate) fn complete_window(
 /// `min Σ_p ‖[M_f t_f] [s_p; 1] − w_fp‖²` over the tracks it sees whose points `s_p`
 /// `prev_fit` holds. `None` (start cold) when the windows do not overlap, the model is not
 /// affine, or a new frame sees fewer than `min_tracks` such tracks (or they are
-/// degenerate). Cost: `O(n_obs(next) · r²)` plus a sort of `prev`'s tracks.
+/// degenerate: [`crate::robust::subspace::solve_camera`] solves each frame). Cost:
+/// `O(n_obs(next))` plus a sort of `prev`'s tracks.
 pub(crate) fn warm_start(
     prev: &Window,
     prev_fit: &completion::Completion,
@@ -1154,10 +1155,10 @@ pub(crate) fn warm_start(
     let (sa, ea, ta, _) = prev;
     let (sb, eb, tb, mb) = next;
     let (sa, ea, sb, eb) = (*sa, *ea, *sb, *eb);
-    if !prev_fit.model.is_affine() || sb < sa || sb >= ea {
+    let r = prev_fit.m.ncols();
+    if !prev_fit.model.is_affine() || r != 3 || sb < sa || sb >= ea {
         return None;
     }
-    let r = prev_fit.m.ncols();
     let mut index: Vec<(usize, usize)> = ta.iter().enumerate().map(|(k, &p)| (p, k)).collect();
     index.sort_unstable();
     let known: Vec<Option<usize>> = tb
@@ -1182,42 +1183,36 @@ pub(crate) fn warm_start(
             }
             continue;
         }
-        let mut a = nalgebra::DMatrix::<f64>::zeros(r + 1, r + 1);
-        let mut b = nalgebra::DMatrix::<f64>::zeros(r + 1, 2);
-        let mut n = 0;
+        let (mut a, mut bx, mut by, mut n) =
+            (Matrix4::zeros(), Vector4::zeros(), Vector4::zeros(), 0);
         for (k, ka) in known.iter().enumerate() {
             let Some(ka) = *ka else { continue };
             if !mb.visible[lf * nt + k] {
                 continue;
             }
-            let x =
-                nalgebra::DVector::from_fn(
-                    r + 1,
-                    |c, _| {
-                        if c < r { prev_fit.s[(c, ka)] } else { 1.0 }
-                    },
-                );
-            a += &x * x.transpose();
-            for j in 0..2 {
-                let w = mb.w[(2 * lf + j, k)];
-                for c in 0..=r {
-                    b[(c, j)] += x[c] * w;
-                }
-            }
+            let v = Vector4::new(
+                prev_fit.s[(0, ka)],
+                prev_fit.s[(1, ka)],
+                prev_fit.s[(2, ka)],
+                1.0,
+            );
+            a += v * v.transpose();
+            bx += v * mb.w[(2 * lf, k)];
+            by += v * mb.w[(2 * lf + 1, k)];
             n += 1;
         }
-        if n < min_tracks.max(r + 1) {
+        if n < min_tracks.max(4) {
             return None;
         }
-        let sol = a.cholesky()?.solve(&b);
-        if sol.iter().any(|v| !v.is_finite()) {
-            return None;
-        }
-        for j in 0..2 {
-            for c in 0..r {
-                m[(2 * lf + j, c)] = sol[(c, j)];
+        let (cx, cy) = crate::robust::subspace::solve_camera(&a, &bx, &by)?;
+        for (j, row) in [cx, cy].iter().enumerate() {
+            if row.iter().any(|v| !v.is_finite()) {
+                return None;
             }
-            t[2 * lf + j] = sol[(r, j)];
+            for c in 0..3 {
+                m[(2 * lf + j, c)] = row[c];
+            }
+            t[2 * lf + j] = row[3];
         }
     }
     Some((m, t))
