@@ -173,6 +173,16 @@ impl MetricModel {
         failed
     }
 
+    /// Row `row` (0: x, 1: y) of frame `f`'s affine camera matrix: `s R[row]`, times
+    /// `aspect` on the x row.
+    #[inline]
+    pub fn camera_row(&self, f: usize, row: usize) -> Vector3<f64> {
+        let r = self.rotations[f].matrix();
+        let s = self.scales[f];
+        let sr = if row == 0 { s * self.aspect } else { s };
+        Vector3::new(r[(row, 0)], r[(row, 1)], r[(row, 2)]) * sr
+    }
+
     /// Adds frame `f`'s observation `w` of a point to its triangulation normal equations
     /// `Σ aaᵀ x = Σ a b` (`a = s R[row]`, times `aspect` on the x row, `b = w[row] − t[row]`).
     #[inline]
@@ -183,11 +193,8 @@ impl MetricModel {
         ata: &mut Matrix3<f64>,
         atb: &mut Vector3<f64>,
     ) {
-        let r = self.rotations[f].matrix();
-        let s = self.scales[f];
         for row in 0..2 {
-            let sr = if row == 0 { s * self.aspect } else { s };
-            let a = Vector3::new(r[(row, 0)], r[(row, 1)], r[(row, 2)]) * sr;
+            let a = self.camera_row(f, row);
             *ata += a * a.transpose();
             *atb += a * (w[row] - self.translations[f][row]);
         }

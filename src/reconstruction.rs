@@ -2619,11 +2619,7 @@ fn sparse_pretest(
         // then "explains" the difference (a 100-frame orthographic corridor: one window at
         // affine RMS 1.37 px, Δχ² 5 853 against 234).
         let start = (model.n_frames() == nf).then(|| {
-            let m = Mat::from_fn(2 * w, 3, |r, k| {
-                let f = a + r / 2;
-                let aspect = if r % 2 == 0 { model.aspect } else { 1.0 };
-                aspect * model.scales[f] * model.rotations[f].matrix()[(r % 2, k)]
-            });
+            let m = Mat::from_fn(2 * w, 3, |r, k| model.camera_row(a + r / 2, r % 2)[k]);
             let t = (0..2 * w)
                 .map(|r| model.translations[a + r / 2][r % 2])
                 .collect();
