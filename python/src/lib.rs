@@ -150,10 +150,13 @@ fn to_py(e: rank3::Error) -> PyErr {
 struct Interrupted(PyErr);
 
 /// Checks signals and calls `progress` (with the GIL) at most every 50 ms, and on every
-/// stage event.
+/// stage event and on the first solver iteration of each stage (so that a fast stage's
+/// iterations are seen at least once, whatever the machine's speed).
 struct PyObserver {
     progress: Option<Py<PyAny>>,
     last: Instant,
+    /// A stage has started and none of its iterations has been delivered yet.
+    fresh: bool,
 }
 
 impl PyObserver {
@@ -161,6 +164,7 @@ impl PyObserver {
         PyObserver {
             progress,
             last: Instant::now() - Duration::from_secs(1),
+            fresh: false,
         }
     }
 
@@ -184,10 +188,15 @@ impl PyObserver {
 
 impl Observer for PyObserver {
     fn on_event(&mut self, event: &Event<'_>) {
-        let force = matches!(
-            event,
-            Event::StageStarted { .. } | Event::StageFinished { .. } | Event::Warning { .. }
-        );
+        let force = match event {
+            Event::StageStarted { .. } => {
+                self.fresh = true;
+                true
+            }
+            Event::StageFinished { .. } | Event::Warning { .. } => true,
+            Event::Iteration { .. } => std::mem::take(&mut self.fresh),
+            _ => false,
+        };
         self.poll(force, |py| {
             let d = PyDict::new(py);
             match event {
