@@ -12,6 +12,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
+use std::borrow::Cow;
 
 use super::{
     Intrinsics, Loss, PerspectiveConfig, PerspectiveFit, PerspectiveModel, adjust_graph,
@@ -494,7 +495,9 @@ pub(crate) fn metric_reference(
 }
 
 /// A window's metric fit from scratch (normalised units; `cfg` its settings), from its
-/// projective fit `own` when one is given (else fitted here).
+/// projective fit `own` when one is given (else fitted here from the window's scaled
+/// orthographic completion). With `own`, that completion is made only if [`super::fit`]
+/// needs its affine starts (no early acceptance of the self-calibration).
 fn fit_window(
     w: &Window,
     own: Option<&ProjectiveModel>,
@@ -502,47 +505,47 @@ fn fit_window(
     projective_cfg: &ProjectiveConfig,
     cfg: &PerspectiveConfig,
 ) -> Result<PerspectiveModel> {
-    let mw = crate::sparse::metric_window(
-        w.start,
-        w.end,
-        &w.tracks,
-        &w.meas,
-        windows,
-        crate::CameraModel::ScaledOrthographic,
-        None,
-    )?;
-    let fitted;
-    let proj = match own {
-        Some(m) => m,
-        None => {
-            let c = &mw.affine;
-            let pcfg = ProjectiveConfig {
-                refine: crate::projective::bundle::LmConfig {
-                    max_iterations: cfg.projective_iterations,
-                    ..projective_cfg.refine.clone()
-                },
-                ..projective_cfg.clone()
-            };
-            fitted = projective::fit(
-                &w.meas,
-                AffineStart {
-                    m: c.m.as_ref(),
-                    s: c.s.as_ref(),
-                    t: &c.t,
-                },
-                &pcfg,
-                0,
-                &mut NoopObserver,
-            )?
-            .model;
-            &fitted
-        }
+    let metric_window = || {
+        crate::sparse::metric_window(
+            w.start,
+            w.end,
+            &w.tracks,
+            &w.meas,
+            windows,
+            crate::CameraModel::ScaledOrthographic,
+            None,
+        )
     };
     // The starts of super::fit: the self-calibration, and the window's scaled orthographic
     // model lifted at several focal lengths, mirrored or not (the self-calibration of a
     // window with weak perspective can land on the depth-reversed reconstruction).
+    if let Some(proj) = own {
+        let affine = || metric_window().ok().map(|mw| Cow::Owned(mw.model()));
+        return Ok(super::fit_lazy(&w.meas, proj, affine, cfg, 0, &mut NoopObserver)?.model);
+    }
+    let mw = metric_window()?;
+    let c = &mw.affine;
+    let pcfg = ProjectiveConfig {
+        refine: crate::projective::bundle::LmConfig {
+            max_iterations: cfg.projective_iterations,
+            ..projective_cfg.refine.clone()
+        },
+        ..projective_cfg.clone()
+    };
+    let proj = projective::fit(
+        &w.meas,
+        AffineStart {
+            m: c.m.as_ref(),
+            s: c.s.as_ref(),
+            t: &c.t,
+        },
+        &pcfg,
+        0,
+        &mut NoopObserver,
+    )?
+    .model;
     let affine = mw.model();
-    Ok(super::fit(&w.meas, proj, Some(&affine), cfg, 0, &mut NoopObserver)?.model)
+    Ok(super::fit(&w.meas, &proj, Some(&affine), cfg, 0, &mut NoopObserver)?.model)
 }
 
 /// Which of `n` windows estimate the sequence's focal length
