@@ -332,10 +332,16 @@ fn chain_windows(
     Ok((focal, chained))
 }
 
-/// Iterations of the metric adjustment of [`metric_reference`]: enough to take the chained
-/// windows' disagreements (a few pixels where they meet) to the noise level's order, not to
-/// converge (the projective adjustment follows).
-const REFERENCE_ITERATIONS: usize = 10;
+/// Iterations of the metric adjustment of [`metric_reference`]: none — only its start, the
+/// placed tracks' points re-solved for the chained cameras (the adjustment's variable
+/// projection), is kept. The projective windows are each placed on these points by their
+/// own homography and the global projective adjustment follows, which iterations here do
+/// not shorten: on a 20 000-frame corridor 10 of them took 45 of the reference's 87 s and
+/// moved the projective start from 0.4858 to 0.4845 px, and the adjustment took the same 33
+/// solves to the same optimum either way (2 000 frames: 32 solves with 0, 1, 3, 10 or 20;
+/// docs/results.md). Without the re-solve (the chain's points as placed) the start was
+/// 0.4851 px against 0.4769 at 2 000 frames.
+const REFERENCE_ITERATIONS: usize = 0;
 
 /// A metric reconstruction of the projective graph `g` (any similarity normalization of the
 /// pixels) by steps 1–3 of [`fit_observations`] — metric windows chained by similarities, no
@@ -345,8 +351,8 @@ const REFERENCE_ITERATIONS: usize = 10;
 /// box and the focal length is the windows' median, as in [`fit_observations`] without
 /// intrinsics.
 ///
-/// The chained windows are then adjusted together for at most [`REFERENCE_ITERATIONS`]
-/// metric bundle adjustment iterations.
+/// The placed tracks' points are then re-solved for the chained cameras (the start of a
+/// metric adjustment of [`REFERENCE_ITERATIONS`] = 0 iterations).
 ///
 /// Its use: a drift-free reference frame for the projective chain of a long sequence
 /// ([`windowed::projective_start`]). A chain of similarities stays well conditioned however
@@ -411,11 +417,9 @@ pub(crate) fn metric_reference(
         })
         .as_ref(),
     )?;
-    // A few iterations of the metric adjustment: the chained windows disagree by a few
-    // pixels where they meet (1.7 px RMS on a 300-frame corridor, 0.47 px after it), and
-    // each projective window is mapped onto these points.
-    // The adjustment sees the placed tracks only (a track no window placed would start on
-    // a ray at a guessed depth and pull the cameras while these few iterations last).
+    // The points re-solved for the chained cameras (each projective window is mapped onto
+    // them): the metric adjustment's start, on the placed tracks only (a track no window
+    // placed would sit on a ray at a guessed depth).
     let kept: Vec<usize> = (0..g.n_pts).filter(|&p| placed[p]).collect();
     let sub = {
         let mut pt_ptr = Vec::with_capacity(kept.len() + 1);
@@ -848,9 +852,11 @@ mod tests {
             est.len()
         );
         // Not exact: the principal point is assumed at the tracks' bounding-box centre (the
-        // truth's is (320, 240)) and the metric adjustment stops after a few iterations.
-        // Measured: worst 0.040 px, structure 0.30 %.
-        assert!(worst < 0.1, "worst reprojection {worst} px");
+        // truth's is (320, 240)) and the chained windows are not adjusted together (only
+        // the points re-solved): they disagree a little where they meet. Measured: worst
+        // 0.113 px (0.040 px with the ten metric iterations of before), structure 0.30 %
+        // (the same).
+        assert!(worst < 0.25, "worst reprojection {worst} px");
         let a = crate::eval::align_similarity(&est, &tru, false).unwrap();
         assert!(a.relative_rms < 0.01, "structure off by {}", a.relative_rms);
     }

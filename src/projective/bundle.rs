@@ -250,7 +250,10 @@ impl Graph {
 /// Settings of [`minimize`]. Every field has a documented default.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LmConfig {
-    /// Cap on linear solves (accepted or rejected steps). Default 300.
+    /// Cap on linear solves (accepted or rejected steps). Default 300. 0 takes no step:
+    /// the start is evaluated — its points re-solved first when `resolve_points` — and
+    /// returned (the long path's metric reference uses that); [`Self::validate`] refuses 0
+    /// in user settings.
     pub max_iterations: usize,
     /// Converged when an accepted step lowers the cost by less than this, relative.
     /// Default 1e-12.

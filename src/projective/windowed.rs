@@ -210,8 +210,8 @@ pub fn affine_start(g: &Graph, cfg: &WindowConfig) -> Result<(Vec<f64>, Vec<f64>
 /// every placed track triangulated from them and reprojected. Above
 /// [`WindowConfig::drift_ratio`] times the median of the windows' own RMS, a metric
 /// reference is built ([`crate::perspective`]'s windows chained by similarities — a chain of
-/// similarities does not drift into ill-conditioned frames — and a few iterations of its
-/// metric adjustment) and every window's own fit is placed again by its own homography onto
+/// similarities does not drift into ill-conditioned frames — with its points re-solved for
+/// the chained cameras) and every window's own fit is placed again by its own homography onto
 /// the reference's points (conditioned as Hartley's DLT), with no sliding-window adjustment:
 /// those move the chain's frame a little at each window, a random walk along its soft
 /// projective modes (on a 300-frame corridor 300 px away from the reference after 14
