@@ -861,23 +861,6 @@ pub struct ModelSelection {
     pub reason: String,
 }
 
-/// `(Δχ², σ²)` of a richer model against the affine one over `n` scalars: `σ² = SS_r /
-/// (n − k)` from the richer model's fit (`k` its parameters, gauge removed) and
-/// `Δχ² = (SS_a − SS_r) / σ²`, with `SS = rms² n`.
-fn delta_chi2(affine_rms: f64, richer_rms: f64, n: f64, k: usize) -> (f64, f64) {
-    let ss_a = affine_rms * affine_rms * n;
-    let ss_r = richer_rms * richer_rms * n;
-    let sigma2 = ss_r / (n - k as f64).max(1.0);
-    let delta = if sigma2 > 0.0 {
-        (ss_a - ss_r) / sigma2
-    } else if ss_a > ss_r {
-        f64::INFINITY
-    } else {
-        0.0
-    };
-    (delta, sigma2)
-}
-
 impl ModelSelection {
     /// The scaled orthographic camera kept by a pre-test on parts of the table
     /// ([`part_pretest`]): `(Δχ², threshold, affine RMS, projective RMS)` over the parts,
@@ -916,7 +899,8 @@ impl ModelSelection {
         let extra = (5 * n_frames).saturating_sub(8).max(1) as f64;
         let threshold = extra * n.max(1.0).ln();
         let k = 11 * n_frames + 3 * n_points;
-        let (delta, sigma2) = delta_chi2(affine_rms, projective_rms, n, k.saturating_sub(15));
+        let (delta, sigma2) =
+            crate::robust::delta_chi2(affine_rms, projective_rms, n, k.saturating_sub(15));
         let perspective = delta > threshold;
         Self {
             chosen: if perspective {
@@ -963,7 +947,8 @@ impl ModelSelection {
             };
         };
         let k = 6 * n_frames + 3 * n_points + 1;
-        let (delta, sigma2) = delta_chi2(affine_rms, p.rms_px, n, k.saturating_sub(7));
+        let (delta, sigma2) =
+            crate::robust::delta_chi2(affine_rms, p.rms_px, n, k.saturating_sub(7));
         let perspective = delta > threshold;
         let reason = format!(
             "{} — perspective RMS {:.4} px (focal {:.0} px) vs scaled orthographic {:.4} px; \
@@ -2565,7 +2550,7 @@ fn part_pretest(
     let (nf, np) = (meas.n_frames(), meas.n_points());
     let n = (2 * meas.n_observed()) as f64;
     let k = (11 * nf + 3 * np).saturating_sub(15);
-    let (delta, _) = delta_chi2(c.rms, pf.rms_px, n, k);
+    let (delta, _) = crate::robust::delta_chi2(c.rms, pf.rms_px, n, k);
     // Akaike's 2 per parameter rather than the BIC's ln n: the pre-test only skips work,
     // so it skips only when even the lenient criterion sees nothing. Without perspective
     // Δχ² is about χ² with 3F − 3 degrees of freedom (mean 3F − 3): twice the mean is

@@ -614,8 +614,9 @@ pub(crate) fn fit_lazy<'a>(
 /// is within the noise of the projective model `proj` on `meas` — its squared cost above
 /// the projective one by at most `σ̂² (d + 3 √(2d))`, `d = dof_P − dof_M` the models'
 /// difference in degrees of freedom (projective `11F + 3N − 15`; metric `6F + 3N − 7` plus
-/// the intrinsics `cfg` estimates) and `σ̂² = C_P / (2n − dof_P)`. False where `d ≤ 0` or
-/// the projective model leaves no residual degrees of freedom. `O(n_obs)`.
+/// the intrinsics `cfg` estimates) and `σ̂² = C_P / (2n − dof_P)`: the camera choice's
+/// [`crate::robust::delta_chi2`] at most `d + 3 √(2d)`. False where `d ≤ 0` or the
+/// projective model leaves no residual degrees of freedom. `O(n_obs)`.
 fn within_noise_of_projective(
     meas: &Measurements,
     proj: &ProjectiveModel,
@@ -625,7 +626,7 @@ fn within_noise_of_projective(
 ) -> bool {
     let (nf, np) = (meas.n_frames() as f64, meas.n_points() as f64);
     let n_res = 2.0 * meas.n_observed() as f64;
-    let dof_p = 11.0 * nf + 3.0 * np - 15.0;
+    let dof_p = (11 * meas.n_frames() + 3 * meas.n_points()).saturating_sub(15);
     let intrinsics = if cfg.intrinsics.focal_px.is_some() {
         0.0
     } else if cfg.per_frame_focal {
@@ -639,14 +640,16 @@ fn within_noise_of_projective(
     } + if cfg.distortion { 1.0 } else { 0.0 }
         + if cfg.estimate_aspect_ratio { 1.0 } else { 0.0 };
     let dof_m = 6.0 * nf + 3.0 * np - 7.0 + intrinsics;
-    let d = dof_p - dof_m;
-    if !(d > 0.0 && n_res > dof_p && metric_rms.is_finite()) {
+    let d = dof_p as f64 - dof_m;
+    if !(d > 0.0 && n_res > dof_p as f64 && metric_rms.is_finite()) {
         return false;
     }
-    let c_p = proj.rms(meas).powi(2) * n_res;
-    let c_m = metric_rms.powi(2) * n_res;
-    let sigma2 = c_p / (n_res - dof_p);
-    c_p.is_finite() && c_m - c_p <= sigma2 * (d + 3.0 * (2.0 * d).sqrt())
+    let proj_rms = proj.rms(meas);
+    if !proj_rms.is_finite() {
+        return false;
+    }
+    let (delta, _) = crate::robust::delta_chi2(metric_rms, proj_rms, n_res, dof_p);
+    delta <= d + 3.0 * (2.0 * d).sqrt()
 }
 
 /// The metric start of a self-calibrated reconstruction `up` (normalised units of

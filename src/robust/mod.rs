@@ -405,6 +405,25 @@ pub fn normal_quantile(p: f64) -> f64 {
     0.5 * (lo + hi)
 }
 
+/// `(Δχ², σ²)` of a richer model against a simpler one nested in it, both fitted to the
+/// same `n` scalars: `σ² = SS_r / (n − k)` from the richer model's fit (`k` its parameters,
+/// gauge removed) and `Δχ² = (SS_s − SS_r) / σ²`, with `SS = rms² n`. Used by the camera
+/// choice (affine against projective or perspective) and by the perspective fit's early
+/// acceptance (metric against projective).
+pub(crate) fn delta_chi2(simple_rms: f64, richer_rms: f64, n: f64, k: usize) -> (f64, f64) {
+    let ss_s = simple_rms * simple_rms * n;
+    let ss_r = richer_rms * richer_rms * n;
+    let sigma2 = ss_r / (n - k as f64).max(1.0);
+    let delta = if sigma2 > 0.0 {
+        (ss_s - ss_r) / sigma2
+    } else if ss_s > ss_r {
+        f64::INFINITY
+    } else {
+        0.0
+    };
+    (delta, sigma2)
+}
+
 /// Quantile `χ²_ν(p)`: exact for ν = 2 (`−2 ln(1 − p)`) and ν = 1 (`z²_{(1+p)/2}`),
 /// Wilson–Hilferty otherwise: `ν (1 − 2/(9ν) + z_p sqrt(2/(9ν)))³`.
 pub fn chi2_quantile(nu: f64, p: f64) -> f64 {
