@@ -517,3 +517,62 @@ fn a_window_whose_own_fit_fails_is_extended_from_the_chain() {
     // σ = 0.5 px less the fitted parameters' share: 0.46 px on the 2 000-frame corridor.
     assert!(fit.rms_px < 0.5, "RMS {} px, {:?}", fit.rms_px, warnings.0);
 }
+
+/// The Gauss–Newton decrement rule (`LmConfig::decrement_tolerance`) ends a noisy
+/// sequence's adjustment sooner than the window rules alone, at an RMS within the 10⁻⁶ it
+/// promises (the projective benchmarks' precision).
+#[test]
+fn the_decrement_rule_ends_a_noisy_sequence_sooner_at_the_same_rms() {
+    use rand::{RngExt, SeedableRng};
+    use rank3::projective::windowed::WindowConfig;
+    use rank3::projective::{ProjectiveConfig, fit_observations};
+    let frames = 80;
+    let (mut obs, n_tracks) = corridor(frames, 500, 5);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+    for o in &mut obs {
+        o.xy[0] += rng.random_range(-0.8..0.8);
+        o.xy[1] += rng.random_range(-0.8..0.8);
+    }
+    let windows = WindowConfig {
+        window: 20,
+        overlap: 10,
+        ..WindowConfig::default()
+    };
+    let run = |decrement_tolerance: f64| {
+        let mut cfg = ProjectiveConfig::default();
+        cfg.refine.decrement_tolerance = decrement_tolerance;
+        fit_observations(
+            &obs,
+            frames,
+            n_tracks,
+            &cfg,
+            &windows,
+            &mut rank3::NoopObserver,
+        )
+        .unwrap()
+    };
+    let with = run(ProjectiveConfig::default().refine.decrement_tolerance);
+    let without = run(0.0);
+    eprintln!(
+        "with the rule: {} px, {} solves; without: {} px, {} solves",
+        with.rms_px, with.report.iterations, without.rms_px, without.report.iterations
+    );
+    assert_eq!(with.report.status, rank3::SolverStatus::Converged);
+    assert!(
+        with.rms_px > 0.3 && with.rms_px < 0.5,
+        "RMS {}",
+        with.rms_px
+    );
+    assert!(
+        (with.rms_px - without.rms_px).abs() <= 1e-6 * without.rms_px,
+        "{} against {}",
+        with.rms_px,
+        without.rms_px
+    );
+    assert!(
+        with.report.iterations < without.report.iterations,
+        "{} solves against {}",
+        with.report.iterations,
+        without.report.iterations
+    );
+}
