@@ -12,8 +12,15 @@
 //! * `poseETA-joint` / `direct-joint`: the same with a joint (Schur, damped points, no
 //!   point re-solve) projective Levenberg–Marquardt instead of VarPro.
 //!
+//! `MATRICES=name:path:best,...` adds more measurement matrices (rank3's text matrix: 2F rows,
+//! `nan` where unobserved) with their best known projective RMS — e.g. the other data sets of
+//! ECCV 2016's Table 7 (github.com/jhh37/pba-datasets, MATLAB files: `M` with `W` the mask);
+//! `ONLY_MATRICES=1` skips the two shipped ones. `VERBOSE=1` prints each start's stages,
+//! `ITER=1` every iteration.
+//!
 //! A run succeeds when its final RMS is within 1e-6 (relative) of the best known projective
-//! optimum. Times are for the whole chain (affine + projective), one start.
+//! optimum, or within half a unit of its sixth decimal (the published figures' precision:
+//! below an RMS of 0.5 px the relative test would ask for more digits than are known). Times are for the whole chain (affine + projective), one start.
 
 use std::time::Instant;
 
@@ -63,6 +70,24 @@ fn variant(name: &str) -> Option<ProjectiveConfig> {
     Some(cfg)
 }
 
+/// Prints every iteration of the projective stages to stderr (`ITER=1`).
+struct Printer;
+
+impl rank3::Observer for Printer {
+    fn on_event(&mut self, e: &rank3::Event<'_>) {
+        if let rank3::Event::Iteration {
+            solver,
+            iteration,
+            rms,
+            lambda,
+            ..
+        } = e
+        {
+            eprintln!("{solver} {iteration} rms {rms:.9} lambda {lambda:.3e}");
+        }
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let k: usize = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(100);
@@ -72,13 +97,37 @@ fn main() {
         variants = vec!["pose0.1".into(), "direct".into()];
     }
     let dir = rank3::datasets::dir();
-    let cases = [
-        ("dino_trimmed", "dino_trimmed/M_dense.txt", 1.114493),
-        ("model_house", "model_house/matrix/M_dense.txt", 0.441660),
+    let mut cases: Vec<(String, std::path::PathBuf, f64)> = vec![
+        (
+            "dino_trimmed".into(),
+            dir.join("dino_trimmed/M_dense.txt"),
+            1.114493,
+        ),
+        (
+            "model_house".into(),
+            dir.join("model_house/matrix/M_dense.txt"),
+            0.441660,
+        ),
     ];
+    // More matrices of the family: `MATRICES=name:path:best,name:path:best` (e.g. the other
+    // data sets of ECCV 2016's Table 7, with their best known projective RMS).
+    for spec in std::env::var("MATRICES").unwrap_or_default().split(',') {
+        let f: Vec<&str> = spec.split(':').collect();
+        if let [name, path, best] = f[..] {
+            match best.parse() {
+                Ok(b) => cases.push((name.into(), path.into(), b)),
+                Err(_) => eprintln!("MATRICES: cannot read the best RMS of {spec:?}"),
+            }
+        } else if !spec.is_empty() {
+            eprintln!("MATRICES: {spec:?} is not name:path:best");
+        }
+    }
+    if std::env::var_os("ONLY_MATRICES").is_some() {
+        cases.drain(..2);
+    }
     println!(
-        "K = {k} random starts per row (seeds {first_seed}..{}); success = final RMS within \
-         1e-6 relative of the best known projective optimum",
+        "K = {k} random starts per row (seeds {first_seed}..{}); success = final RMS within 1e-6 \
+         relative of the best known projective optimum or half a unit of its sixth decimal",
         first_seed + k as u64
     );
     println!();
@@ -86,8 +135,7 @@ fn main() {
         "| data set | variant | success | affine optimum reached | converged/stalled/max-it | median iterations (pOSE + BA) | median s | p90 s | best RMS | best known |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
-    for (name, rel, best_known) in cases {
-        let path = dir.join(rel);
+    for (name, path, best_known) in cases {
         if !path.exists() {
             println!(
                 "| {name} | - | data set not found at {} (set RANK3_DATASETS); skipped |",
@@ -114,6 +162,10 @@ fn main() {
             let mut best = f64::INFINITY;
             let mut affine_best = f64::INFINITY;
             let mut affine_rms = Vec::new();
+            let mut failed = false;
+            // The published optima have six decimals: a run succeeds within 1e-6 of the
+            // optimum (relative) or within half a unit of its last published digit.
+            let tolerance = (1e-6 * best_known).max(5e-7);
             for seed in first_seed..first_seed + k as u64 {
                 let t0 = Instant::now();
                 let acfg = CompletionConfig {
@@ -124,8 +176,9 @@ fn main() {
                 let c = match complete(&meas, &acfg, &mut NoopObserver) {
                     Ok(c) => c,
                     Err(e) => {
-                        println!("| {name} | {v} | affine error: {e} |");
-                        return;
+                        println!("| {name} | {v} | affine error (seed {seed}): {e} |");
+                        failed = true;
+                        break;
                     }
                 };
                 let start = AffineStart {
@@ -133,18 +186,26 @@ fn main() {
                     s: c.s.as_ref(),
                     t: &c.t,
                 };
-                let r = match fit(&meas, start, &cfg, 0, &mut NoopObserver) {
+                let mut printer = Printer;
+                let mut noop = NoopObserver;
+                let obs: &mut dyn rank3::Observer = if std::env::var_os("ITER").is_some() {
+                    &mut printer
+                } else {
+                    &mut noop
+                };
+                let r = match fit(&meas, start, &cfg, 0, obs) {
                     Ok(r) => r,
                     Err(e) => {
-                        println!("| {name} | {v} | projective error: {e} |");
-                        return;
+                        println!("| {name} | {v} | projective error (seed {seed}): {e} |");
+                        failed = true;
+                        break;
                     }
                 };
                 times.push(t0.elapsed().as_secs_f64());
                 iters.push(r.stages.iter().map(|s| s.iterations).sum::<usize>() as f64);
                 affine_rms.push(c.rms);
                 affine_best = affine_best.min(c.rms);
-                if ((r.rms_px - best_known) / best_known).abs() <= 1e-6 {
+                if (r.rms_px - best_known).abs() <= tolerance {
                     ok += 1;
                 }
                 match r.report.status {
@@ -155,8 +216,10 @@ fn main() {
                 best = best.min(r.rms_px);
                 if std::env::var_os("VERBOSE").is_some() {
                     eprintln!(
-                        "{name} {v} seed {seed}: affine {:.6} -> {:.6} ({:?})",
+                        "{name} {v} seed {seed}: affine {:.6} ({:?}, {} it) -> {:.6} ({:?})",
                         c.rms,
+                        c.report.status,
+                        c.report.iterations,
                         r.rms_px,
                         r.stages
                             .iter()
@@ -168,12 +231,15 @@ fn main() {
                     );
                 }
             }
+            if failed {
+                continue;
+            }
             affine_ok += affine_rms
                 .iter()
                 .filter(|&&a| (a - affine_best) / affine_best <= 1e-6)
                 .count();
             println!(
-                "| {name} | {v} | {ok}/{k} ({:.0} %) | {affine_ok}/{k} | {conv}/{stall}/{maxit} | {:.0} | {:.3} | {:.3} | {best:.6} | {best_known} |",
+                "| {name} | {v} | {ok}/{k} ({:.0} %) | {affine_ok}/{k} | {conv}/{stall}/{maxit} | {:.0} | {:.3} | {:.3} | {best:.9} | {best_known} |",
                 100.0 * ok as f64 / k as f64,
                 quantile(&mut iters, 0.5),
                 quantile(&mut times.clone(), 0.5),
