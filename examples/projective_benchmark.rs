@@ -173,7 +173,14 @@ fn main() {
                     seed,
                     ..CompletionConfig::default()
                 };
-                let c = match complete(&meas, &acfg, &mut NoopObserver) {
+                let mut printer = Printer;
+                let mut noop = NoopObserver;
+                let obs: &mut dyn rank3::Observer = if std::env::var_os("ITER").is_some() {
+                    &mut printer
+                } else {
+                    &mut noop
+                };
+                let c = match complete(&meas, &acfg, obs) {
                     Ok(c) => c,
                     Err(e) => {
                         println!("| {name} | {v} | affine error (seed {seed}): {e} |");
@@ -185,13 +192,6 @@ fn main() {
                     m: c.m.as_ref(),
                     s: c.s.as_ref(),
                     t: &c.t,
-                };
-                let mut printer = Printer;
-                let mut noop = NoopObserver;
-                let obs: &mut dyn rank3::Observer = if std::env::var_os("ITER").is_some() {
-                    &mut printer
-                } else {
-                    &mut noop
                 };
                 let r = match fit(&meas, start, &cfg, 0, obs) {
                     Ok(r) => r,
