@@ -56,8 +56,9 @@ fn variant(name: &str) -> Option<ProjectiveConfig> {
         cfg.refine.damp_points = true;
         cfg.refine.resolve_points = false;
     }
-    // Experiments: `NOISE_TOL=τ` / `REL_TOL=τ` / `GEO=α` set the adjustment's noise-level
-    // stop, its relative tail stop and geodesic acceleration.
+    // Experiments: `NOISE_TOL=τ` / `REL_TOL=τ` / `GEO=α` / `EXT=n` / `LDEC=f` set the
+    // adjustment's noise-level stop, its relative tail stop, geodesic acceleration, step
+    // extension trials and damping decrease.
     if let Some(t) = std::env::var("NOISE_TOL").ok().and_then(|v| v.parse().ok()) {
         cfg.refine.noise_tolerance = t;
     }
@@ -66,6 +67,12 @@ fn variant(name: &str) -> Option<ProjectiveConfig> {
     }
     if let Some(a) = std::env::var("GEO").ok().and_then(|v| v.parse().ok()) {
         cfg.refine.geodesic_acceleration = a;
+    }
+    if let Some(a) = std::env::var("EXT").ok().and_then(|v| v.parse().ok()) {
+        cfg.refine.extension_trials = a;
+    }
+    if let Some(a) = std::env::var("LDEC").ok().and_then(|v| v.parse().ok()) {
+        cfg.refine.lambda_decrease = a;
     }
     Some(cfg)
 }

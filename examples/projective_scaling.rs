@@ -73,7 +73,8 @@ impl rank3::Observer for Printer {
 /// chaining affine windows (`WindowConfig::projective = false`) instead of projective ones.
 /// `JOINT=1` in the environment uses the joint (damped points, no re-solve) bundle
 /// adjustment instead of variable projection, `DIRECT=1` skips pOSE, `GEO=α` sets the
-/// geodesic acceleration, `NOISE_TOL=τ` the noise-level stop (0: off), `REL_TOL=τ` the
+/// geodesic acceleration, `LDEC=f` the damping's decrease after a good step
+/// (`LmConfig::lambda_decrease`), `NOISE_TOL=τ` the noise-level stop (0: off), `REL_TOL=τ` the
 /// relative tail stop (0: off), `DRIFT=r` the windows' drift test
 /// (`WindowConfig::drift_ratio`; 0: always place the windows on the metric reference,
 /// negative: never), and `METRIC_START=1`
@@ -92,6 +93,9 @@ fn config(max_iterations: Option<usize>) -> ProjectiveConfig {
     }
     if let Some(a) = std::env::var("GEO").ok().and_then(|v| v.parse().ok()) {
         c.refine.geodesic_acceleration = a;
+    }
+    if let Some(a) = std::env::var("LDEC").ok().and_then(|v| v.parse().ok()) {
+        c.refine.lambda_decrease = a;
     }
     if let Some(a) = std::env::var("NOISE_TOL").ok().and_then(|v| v.parse().ok()) {
         c.refine.noise_tolerance = a;
