@@ -30,7 +30,8 @@
 //! `S` (the reduced camera system) is sparse: block `(f, g)` is non-zero only when frames
 //! `f` and `g` share a track, so for a video it is banded. It is factorised by faer's sparse
 //! Cholesky (fill-reducing AMD ordering, supernodal or simplicial by its own flop rule);
-//! the symbolic analysis is done once per problem.
+//! the symbolic analysis is done once per problem, and the numeric factor's
+//! storage and workspace once per adjustment (`Factor`).
 //!
 //! **Variable projection** ([`LmConfig::resolve_points`] with `damp_points = false`): after
 //! every camera step the points are replaced by their optimum for the new cameras (a few
