@@ -467,6 +467,8 @@ struct Pattern {
 struct Factor {
     values: Vec<f64>,
     work: MemBuffer,
+    /// The parallelism the workspace was sized for (faer's global setting at the start).
+    par: Par,
 }
 
 impl Factor {
@@ -483,7 +485,7 @@ impl Factor {
             .try_reserve_exact(symbolic.len_val())
             .map_err(|e| format!("Cholesky factor of the reduced camera system: {e}"))?;
         values.resize(symbolic.len_val(), 0.0);
-        Ok(Self { values, work })
+        Ok(Self { values, work, par })
     }
 
     /// Factorizes `mat` (lower triangle); `false` when it is not numerically positive
@@ -500,7 +502,7 @@ impl Factor {
                 mat,
                 Side::Lower,
                 Default::default(),
-                faer::get_global_parallelism(),
+                self.par,
                 MemStack::new(&mut self.work),
                 Default::default(),
             )
@@ -512,7 +514,7 @@ impl Factor {
         LltRef::new(symbolic, &self.values).solve_in_place_with_conj(
             faer::Conj::No,
             rhs,
-            faer::get_global_parallelism(),
+            self.par,
             MemStack::new(&mut self.work),
         );
     }
