@@ -489,13 +489,14 @@ impl Factor {
     }
 
     /// Factorizes `mat` (lower triangle); `false` when it is not numerically positive
-    /// definite (the values are then meaningless until the next success).
+    /// definite (the values are then meaningless until the next success). The values need
+    /// no clearing between calls: faer's supernodal factorization zeroes them itself and
+    /// the simplicial one writes every entry before reading it.
     fn factorize(
         &mut self,
         symbolic: &SymbolicCholesky<usize>,
         mat: SparseColMatRef<'_, usize, f64>,
     ) -> bool {
-        self.values.fill(0.0);
         symbolic
             .factorize_numeric_llt::<f64>(
                 &mut self.values,
