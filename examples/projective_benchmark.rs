@@ -16,7 +16,7 @@
 //! `nan` where unobserved) with their best known projective RMS — e.g. the other data sets of
 //! ECCV 2016's Table 7 (github.com/jhh37/pba-datasets, MATLAB files: `M` with `W` the mask);
 //! `ONLY_MATRICES=1` skips the two shipped ones. `VERBOSE=1` prints each start's stages,
-//! `ITER=1` every iteration.
+//! `ITER=1` every iteration, warning and finished stage of the affine and projective solvers.
 //!
 //! A run succeeds when its final RMS is within 1e-6 (relative) of the best known projective
 //! optimum, or within half a unit of its sixth decimal (the published figures' precision:
@@ -24,7 +24,8 @@
 
 use std::time::Instant;
 
-use rank3::NoopObserver;
+mod common;
+
 use rank3::completion::{CompletionConfig, Init, complete};
 use rank3::projective::{AffineStart, Bridge, ProjectiveConfig, fit};
 
@@ -59,40 +60,22 @@ fn variant(name: &str) -> Option<ProjectiveConfig> {
     // Experiments: `NOISE_TOL=τ` / `REL_TOL=τ` / `GEO=α` / `EXT=n` / `LDEC=f` set the
     // adjustment's noise-level stop, its relative tail stop, geodesic acceleration, step
     // extension trials and damping decrease.
-    if let Some(t) = std::env::var("NOISE_TOL").ok().and_then(|v| v.parse().ok()) {
+    if let Some(t) = common::env("NOISE_TOL") {
         cfg.refine.noise_tolerance = t;
     }
-    if let Some(t) = std::env::var("REL_TOL").ok().and_then(|v| v.parse().ok()) {
+    if let Some(t) = common::env("REL_TOL") {
         cfg.refine.window_relative_tolerance = t;
     }
-    if let Some(a) = std::env::var("GEO").ok().and_then(|v| v.parse().ok()) {
+    if let Some(a) = common::env("GEO") {
         cfg.refine.geodesic_acceleration = a;
     }
-    if let Some(a) = std::env::var("EXT").ok().and_then(|v| v.parse().ok()) {
+    if let Some(a) = common::env("EXT") {
         cfg.refine.extension_trials = a;
     }
-    if let Some(a) = std::env::var("LDEC").ok().and_then(|v| v.parse().ok()) {
+    if let Some(a) = common::env("LDEC") {
         cfg.refine.lambda_decrease = a;
     }
     Some(cfg)
-}
-
-/// Prints every iteration of the projective stages to stderr (`ITER=1`).
-struct Printer;
-
-impl rank3::Observer for Printer {
-    fn on_event(&mut self, e: &rank3::Event<'_>) {
-        if let rank3::Event::Iteration {
-            solver,
-            iteration,
-            rms,
-            lambda,
-            ..
-        } = e
-        {
-            eprintln!("{solver} {iteration} rms {rms:.9} lambda {lambda:.3e}");
-        }
-    }
 }
 
 fn main() {
@@ -170,6 +153,7 @@ fn main() {
             let mut affine_best = f64::INFINITY;
             let mut affine_rms = Vec::new();
             let mut failed = false;
+            let mut trace = common::Trace::from_env("ITER");
             // The published optima have six decimals: a run succeeds within 1e-6 of the
             // optimum (relative) or within half a unit of its last published digit.
             let tolerance = (1e-6 * best_known).max(5e-7);
@@ -180,14 +164,7 @@ fn main() {
                     seed,
                     ..CompletionConfig::default()
                 };
-                let mut printer = Printer;
-                let mut noop = NoopObserver;
-                let obs: &mut dyn rank3::Observer = if std::env::var_os("ITER").is_some() {
-                    &mut printer
-                } else {
-                    &mut noop
-                };
-                let c = match complete(&meas, &acfg, obs) {
+                let c = match complete(&meas, &acfg, &mut trace) {
                     Ok(c) => c,
                     Err(e) => {
                         println!("| {name} | {v} | affine error (seed {seed}): {e} |");
@@ -200,7 +177,7 @@ fn main() {
                     s: c.s.as_ref(),
                     t: &c.t,
                 };
-                let r = match fit(&meas, start, &cfg, 0, obs) {
+                let r = match fit(&meas, start, &cfg, 0, &mut trace) {
                     Ok(r) => r,
                     Err(e) => {
                         println!("| {name} | {v} | projective error (seed {seed}): {e} |");

@@ -43,31 +43,6 @@ fn stage_summary(stages: &[rank3::projective::StageReport]) -> String {
         .join(", ")
 }
 
-/// With `VERBOSE` set, prints every solver iteration to stderr.
-struct Printer;
-
-impl rank3::Observer for Printer {
-    fn on_event(&mut self, e: &rank3::Event<'_>) {
-        if std::env::var_os("VERBOSE").is_none() {
-            return;
-        }
-        match e {
-            rank3::Event::Iteration {
-                solver,
-                iteration,
-                rms,
-                lambda,
-                ..
-            } => eprintln!("{solver} {iteration} rms {rms:.9} lambda {lambda:.3e}"),
-            rank3::Event::Warning { message } => eprintln!("warning: {message}"),
-            rank3::Event::StageFinished { stage, seconds } => {
-                eprintln!("stage {stage} {seconds:.1} s")
-            }
-            _ => {}
-        }
-    }
-}
-
 /// The configuration of a run: the defaults, with `--max-iterations N` capping the bundle
 /// adjustment (to measure the cost per iteration on long sequences) and `--affine-windows`
 /// chaining affine windows (`WindowConfig::projective = false`) instead of projective ones.
@@ -88,16 +63,16 @@ fn config(max_iterations: Option<usize>) -> ProjectiveConfig {
         c.refine.damp_points = true;
         c.refine.resolve_points = false;
     }
-    if let Some(t) = std::env::var("REL_TOL").ok().and_then(|v| v.parse().ok()) {
+    if let Some(t) = common::env("REL_TOL") {
         c.refine.window_relative_tolerance = t;
     }
-    if let Some(a) = std::env::var("GEO").ok().and_then(|v| v.parse().ok()) {
+    if let Some(a) = common::env("GEO") {
         c.refine.geodesic_acceleration = a;
     }
-    if let Some(a) = std::env::var("LDEC").ok().and_then(|v| v.parse().ok()) {
+    if let Some(a) = common::env("LDEC") {
         c.refine.lambda_decrease = a;
     }
-    if let Some(a) = std::env::var("NOISE_TOL").ok().and_then(|v| v.parse().ok()) {
+    if let Some(a) = common::env("NOISE_TOL") {
         c.refine.noise_tolerance = a;
     }
     if std::env::var_os("DIRECT").is_some() {
@@ -121,17 +96,14 @@ fn one(frames: usize, per_frame: usize, max_iterations: Option<usize>, affine_wi
             &config(max_iterations),
             &WindowConfig {
                 projective: !affine_windows,
-                drift_ratio: match std::env::var("DRIFT")
-                    .ok()
-                    .and_then(|v| v.parse::<f64>().ok())
-                {
+                drift_ratio: match common::env::<f64>("DRIFT") {
                     Some(r) if r < 0.0 => None,
                     Some(r) => Some(r),
                     None => WindowConfig::default().drift_ratio,
                 },
                 ..WindowConfig::default()
             },
-            &mut Printer,
+            &mut common::Trace::from_env("VERBOSE"),
         )
     };
     let seconds = t0.elapsed().as_secs_f64();
@@ -173,7 +145,7 @@ fn metric_start(
         &pcfg,
         cfg,
         &WindowConfig::default(),
-        &mut Printer,
+        &mut common::Trace::from_env("VERBOSE"),
     )?;
     let metric_s = t0.elapsed().as_secs_f64();
     let start = rank3::projective::ProjectiveModel {
@@ -185,8 +157,14 @@ fn metric_start(
             .map(|x| [x[0], x[1], x[2], 1.0])
             .collect(),
     };
-    let mut fit =
-        rank3::projective::refine_observations(obs, frames, n_tracks, &start, cfg, &mut Printer)?;
+    let mut fit = rank3::projective::refine_observations(
+        obs,
+        frames,
+        n_tracks,
+        &start,
+        cfg,
+        &mut common::Trace::from_env("VERBOSE"),
+    )?;
     fit.stages.insert(
         0,
         rank3::projective::StageReport {
@@ -223,7 +201,7 @@ fn one_perspective(frames: usize, per_frame: usize, focal: Option<f64>, from_tru
         &cfg,
         &config(None),
         &WindowConfig::default(),
-        &mut Printer,
+        &mut common::Trace::from_env("VERBOSE"),
     );
     let seconds = t0.elapsed().as_secs_f64();
     match r {
@@ -266,7 +244,7 @@ fn one_perspective(frames: usize, per_frame: usize, focal: Option<f64>, from_tru
             n_tracks,
             &start,
             &cfg,
-            &mut Printer,
+            &mut common::Trace::from_env("VERBOSE"),
         ) {
             Ok(fit) => {
                 let f = fit.model.focal_px[0];

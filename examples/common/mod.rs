@@ -1,7 +1,54 @@
 //! Helpers shared by the example programs that print measured figures.
 
+/// The environment variable `name` parsed as `T`; `None` when unset or not parsable (the
+/// experiment knobs of the example programs).
+#[allow(dead_code)]
+pub fn env<T: std::str::FromStr>(name: &str) -> Option<T> {
+    std::env::var(name).ok()?.parse().ok()
+}
+
+/// A solver trace on stderr — every iteration (solver, index, RMS, damping), warning and
+/// finished stage — printed only when `on`.
+#[allow(dead_code)]
+pub struct Trace {
+    pub on: bool,
+}
+
+#[allow(dead_code)]
+impl Trace {
+    /// On when the environment variable `name` is set.
+    pub fn from_env(name: &str) -> Self {
+        Self {
+            on: std::env::var_os(name).is_some(),
+        }
+    }
+}
+
+impl rank3::Observer for Trace {
+    fn on_event(&mut self, e: &rank3::Event<'_>) {
+        if !self.on {
+            return;
+        }
+        match e {
+            rank3::Event::Iteration {
+                solver,
+                iteration,
+                rms,
+                lambda,
+                ..
+            } => eprintln!("{solver} {iteration} rms {rms:.9} lambda {lambda:.3e}"),
+            rank3::Event::Warning { message } => eprintln!("warning: {message}"),
+            rank3::Event::StageFinished { stage, seconds } => {
+                eprintln!("stage {stage} {seconds:.1} s")
+            }
+            _ => {}
+        }
+    }
+}
+
 /// Peak resident memory of this process (`VmHWM` of `/proc/self/status`), MB; NaN where
 /// `/proc` is not available.
+#[allow(dead_code)]
 pub fn peak_rss_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
