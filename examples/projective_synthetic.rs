@@ -396,8 +396,8 @@ fn bridge_table(seeds: std::ops::Range<u64>) {
     );
     println!("|---|---|---|---|---|---|---|---|---|");
     let bridges = [
-        ("pOSE η = 0.1 (default)", Bridge::Pose { eta: 0.1 }),
-        ("pOSE η = 0.01", Bridge::Pose { eta: 0.01 }),
+        ("pOSE η = 0.01 (default)", Bridge::Pose { eta: 0.01 }),
+        ("pOSE η = 0.1", Bridge::Pose { eta: 0.1 }),
         ("direct", Bridge::Direct),
     ];
     let mut errors = Vec::new();
