@@ -26,7 +26,12 @@ SETS = {
     "corridor": ("Corridor/corridor.mat", 0.272462),
     "dinosaur_trimmed": ("Dinosaur_trimmed/dinosaur_trimmed.mat", 1.114493),
     "dinosaur": ("Dinosaur/dinosaur.mat", 1.166165),
-    "dinosaur_closer": ("Dinosaur_closer/dinosaur_closer.mat", 0.838414),
+    # Table 7 gives 0.838414, but this file is not the matrix behind it: its affine optimum,
+    # reached from 86 of 100 random starts, is 8.643080, below Table 7's best affine 9.380473
+    # (every other matrix here matches Table 7's affine and projective optima to the printed
+    # digits). 0.846283 is this file's optimum: rank3 reaches it from the noise-free truth
+    # (`M_true`) and from 96 of 100 random starts (docs/results.md).
+    "dinosaur_closer": ("Dinosaur_closer/dinosaur_closer.mat", 0.846283),
     "house": ("House/house.mat", 0.441660),
     "library": ("Library/library.mat", 0.172830),
     "merton1": ("Merton_1/merton_1.mat", 0.118450),
@@ -35,6 +40,19 @@ SETS = {
     "wadham": ("Wadham/wadham.mat", 0.135711),
     "wilshire": ("Wilshire/Wilshire.mat", 0.423892),
 }
+# The synthetic spheres of ECCV 2016's Table 6 (319 points on a sphere of radius 10, 36
+# cameras on a ring of radius d, 77 % missing; "_lc" = loop closed), best projective RMS.
+for d, tag, best, best_lc in [
+    (3000, "Sphere", 0.842539, 0.861392),
+    (2000, "Sphere", 0.842511, 0.862520),
+    (1300, "sphere", 0.844125, 0.863871),
+    (1200, "Sphere", 0.844817, 0.863867),
+    (1100, "Sphere", 0.845271, 0.863274),
+    (1050, "Sphere", 0.844771, 0.862545),
+]:
+    for lc, b in [("", best), ("_loop_closed", best_lc)]:
+        base = f"sphere_d{d}_miss77{lc}"
+        SETS[base] = (f"{tag}_d{d}_miss77{lc}/{base}.mat", b)
 
 
 def main():
