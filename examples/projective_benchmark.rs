@@ -57,24 +57,8 @@ fn variant(name: &str) -> Option<ProjectiveConfig> {
         cfg.refine.damp_points = true;
         cfg.refine.resolve_points = false;
     }
-    // Experiments: `NOISE_TOL=τ` / `REL_TOL=τ` / `GEO=α` / `EXT=n` / `LDEC=f` set the
-    // adjustment's noise-level stop, its relative tail stop, geodesic acceleration, step
-    // extension trials and damping decrease.
-    if let Some(t) = common::env("NOISE_TOL") {
-        cfg.refine.noise_tolerance = t;
-    }
-    if let Some(t) = common::env("REL_TOL") {
-        cfg.refine.window_relative_tolerance = t;
-    }
-    if let Some(a) = common::env("GEO") {
-        cfg.refine.geodesic_acceleration = a;
-    }
-    if let Some(a) = common::env("EXT") {
-        cfg.refine.extension_trials = a;
-    }
-    if let Some(a) = common::env("LDEC") {
-        cfg.refine.lambda_decrease = a;
-    }
+    // Experiments: `NOISE_TOL`, `REL_TOL`, `GEO`, `EXT`, `LDEC` (`common::adjustment_knobs`).
+    common::adjustment_knobs(&mut cfg.refine);
     Some(cfg)
 }
 
@@ -157,6 +141,7 @@ fn main() {
             // The published optima have six decimals: a run succeeds within 1e-6 of the
             // optimum (relative) or within half a unit of its last published digit.
             let tolerance = (1e-6 * best_known).max(5e-7);
+            let verbose = std::env::var_os("VERBOSE").is_some();
             for seed in first_seed..first_seed + k as u64 {
                 let t0 = Instant::now();
                 let acfg = CompletionConfig {
@@ -198,7 +183,7 @@ fn main() {
                     rank3::SolverStatus::MaxIterations => maxit += 1,
                 }
                 best = best.min(r.rms_px);
-                if std::env::var_os("VERBOSE").is_some() {
+                if verbose {
                     eprintln!(
                         "{name} {v} seed {seed}: affine {:.6} ({:?}, {} it) -> {:.6} ({:?})",
                         c.rms,

@@ -47,10 +47,9 @@ fn stage_summary(stages: &[rank3::projective::StageReport]) -> String {
 /// adjustment (to measure the cost per iteration on long sequences) and `--affine-windows`
 /// chaining affine windows (`WindowConfig::projective = false`) instead of projective ones.
 /// `JOINT=1` in the environment uses the joint (damped points, no re-solve) bundle
-/// adjustment instead of variable projection, `DIRECT=1` skips pOSE, `GEO=α` sets the
-/// geodesic acceleration, `LDEC=f` the damping's decrease after a good step
-/// (`LmConfig::lambda_decrease`), `NOISE_TOL=τ` the noise-level stop (0: off), `REL_TOL=τ` the
-/// relative tail stop (0: off), `DRIFT=r` the windows' drift test
+/// adjustment instead of variable projection, `DIRECT=1` skips pOSE, `NOISE_TOL`, `REL_TOL`,
+/// `GEO`, `EXT` and `LDEC` set the adjustment's knobs (`common::adjustment_knobs`),
+/// `DRIFT=r` the windows' drift test
 /// (`WindowConfig::drift_ratio`; 0: always place the windows on the metric reference,
 /// negative: never), and `METRIC_START=1`
 /// starts the adjustment from the metric chain's cameras (experiments).
@@ -63,18 +62,7 @@ fn config(max_iterations: Option<usize>) -> ProjectiveConfig {
         c.refine.damp_points = true;
         c.refine.resolve_points = false;
     }
-    if let Some(t) = common::env("REL_TOL") {
-        c.refine.window_relative_tolerance = t;
-    }
-    if let Some(a) = common::env("GEO") {
-        c.refine.geodesic_acceleration = a;
-    }
-    if let Some(a) = common::env("LDEC") {
-        c.refine.lambda_decrease = a;
-    }
-    if let Some(a) = common::env("NOISE_TOL") {
-        c.refine.noise_tolerance = a;
-    }
+    common::adjustment_knobs(&mut c.refine);
     if std::env::var_os("DIRECT").is_some() {
         c.bridge = rank3::projective::Bridge::Direct;
     }

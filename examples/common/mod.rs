@@ -7,6 +7,29 @@ pub fn env<T: std::str::FromStr>(name: &str) -> Option<T> {
     std::env::var(name).ok()?.parse().ok()
 }
 
+/// The projective adjustment's experiment knobs, read from the environment into `c`:
+/// `NOISE_TOL=τ` the noise-level stop (0: off), `REL_TOL=τ` the relative tail stop (0: off),
+/// `GEO=α` the geodesic acceleration, `EXT=n` the step extension trials and `LDEC=f` the
+/// damping's decrease after a good step. Unset or unparsable variables leave `c` as it is.
+#[allow(dead_code)]
+pub fn adjustment_knobs(c: &mut rank3::projective::bundle::LmConfig) {
+    if let Some(t) = env("NOISE_TOL") {
+        c.noise_tolerance = t;
+    }
+    if let Some(t) = env("REL_TOL") {
+        c.window_relative_tolerance = t;
+    }
+    if let Some(a) = env("GEO") {
+        c.geodesic_acceleration = a;
+    }
+    if let Some(n) = env("EXT") {
+        c.extension_trials = n;
+    }
+    if let Some(f) = env("LDEC") {
+        c.lambda_decrease = f;
+    }
+}
+
 /// A solver trace on stderr — every iteration (solver, index, RMS, damping), warning and
 /// finished stage — printed only when `on`.
 #[allow(dead_code)]
