@@ -11,8 +11,9 @@
 //! `0.2,0.5`), `WALKS` (random-walk tracks added as a fraction of the tracks, default 0.1),
 //! `SEED` (default 1), `SPECTRAL=0` (the energy alone, without the spectral partition at
 //! the count), `LABEL_COST`, `HYPOTHESES`, `NEIGHBOURS`, `GROW`, `SMOOTH`, `EIGENGAP`,
-//! `SPLIT`, `MERGE` (the `SegmentConfig` fields of those names, `SPLIT` = `split_separation`,
-//! `MERGE` = `merge_ratio`;
+//! `SPLIT`, `MERGE`, `SHORT_FRAMES`, `SHORT_MARGIN` (the `SegmentConfig` fields of those
+//! names, `SPLIT` = `split_separation`, `MERGE` = `merge_ratio`, `SHORT_*` =
+//! `short_track_*`;
 //! `EIGENGAP=0 SPLIT=0` counts by the label cost alone). Each file's row ends with the rule
 //! that set the count found, the groups' separation (docs/math.md §11) and the errors with
 //! every track assigned to a group (`label_outliers = false`, `--assign-all`: the published
@@ -74,6 +75,8 @@ fn run_labelled(
         eigengap: env_or("EIGENGAP", SegmentConfig::default().eigengap),
         split_separation: env_or("SPLIT", SegmentConfig::default().split_separation),
         merge_ratio: env_or("MERGE", SegmentConfig::default().merge_ratio),
+        short_track_frames: env_or("SHORT_FRAMES", SegmentConfig::default().short_track_frames),
+        short_track_margin: env_or("SHORT_MARGIN", SegmentConfig::default().short_track_margin),
         ..Default::default()
     };
     let t = Instant::now();
@@ -364,6 +367,9 @@ fn main() {
             mut count,
         ) = (0.0, 0usize, 0usize, 0usize, 0usize, 0usize, 0usize);
         let mut missing_sum = 0.0;
+        // Of the true tracks: the fraction labelled unscored, labelled outlier (each
+        // counts as misclassified), summed over the files.
+        let (mut unscored_sum, mut outlier_sum) = (0.0, 0.0);
         for path in &files {
             let name = path.file_stem().unwrap().to_string_lossy().to_string();
             if !wanted.is_empty() && !wanted.contains(&name) {
@@ -378,6 +384,16 @@ fn main() {
             let n0 = h0.groups.len();
             let codes = seg.codes();
             err_sum += misclassification(&codes[..n0], &h0.groups);
+            unscored_sum += seg.labels[..n0]
+                .iter()
+                .filter(|l| **l == Label::Unscored)
+                .count() as f64
+                / n0 as f64;
+            outlier_sum += seg.labels[..n0]
+                .iter()
+                .filter(|l| **l == Label::Outlier)
+                .count() as f64
+                / n0 as f64;
             let flagged: Vec<bool> = seg
                 .labels
                 .iter()
@@ -394,10 +410,12 @@ fn main() {
         }
         if count > 0 {
             println!(
-                "hidden {:.0}% of entries on average, +{:.0}% random walks ({count} files): mean misclassification of the true tracks {:.2}%, K right {k_right}/{count}, outlier precision {:.3} recall {:.3}",
+                "hidden {:.0}% of entries on average, +{:.0}% random walks ({count} files): mean misclassification of the true tracks {:.2}% (of them unscored {:.2}%, labelled outlier {:.2}%), K right {k_right}/{count}, outlier precision {:.3} recall {:.3}",
                 100.0 * missing_sum / count as f64,
                 100.0 * walk_frac,
                 100.0 * err_sum / count as f64,
+                100.0 * unscored_sum / count as f64,
+                100.0 * outlier_sum / count as f64,
                 prec_num as f64 / prec_den.max(1) as f64,
                 rec_num as f64 / rec_den.max(1) as f64,
             );

@@ -63,7 +63,8 @@ pub struct MultiBodyReport {
     pub merge_tests: Vec<crate::segment::MergeTest>,
     /// Tracks explained by no group.
     pub n_outlier_tracks: usize,
-    /// Tracks seen in too few frames to be scored.
+    /// Tracks seen in too few frames to be scored and not placed by the short-track step
+    /// ([`crate::segment::Label::Unscored`]).
     pub n_unscored_tracks: usize,
     /// Per-coordinate RMS of all grouped tracks' subspace fits, px.
     pub sigma_px: f64,

@@ -83,9 +83,16 @@
 //!    whose affine separation exceeds [`SegmentConfig::merge_max_separation`] are not
 //!    fitted. The tracks no group held are then judged again under each merged group's
 //!    perspective cameras, as in step 5. See `perspective`.
+//! 7. **Short tracks** (seen in 3 to `subspace.min_overlap − 1` frames, too few for the
+//!    search: `short_track_frames`): each is fitted, untrimmed, to every final group whose
+//!    subspace covers its frames, and joins the one of least `D_p(g)` when that passes a
+//!    χ² test at 0.999 and beats the outlier model (as in `E`), and every other group's
+//!    `D_p` is at least [`SegmentConfig::short_track_margin`] higher. Half the tracks of
+//!    a video whose tracks enter and leave can be this short (docs/results.md). The groups'
+//!    subspaces are not refitted to them.
 //!
 //! Groups with fewer than `min_group_tracks` tracks are never kept. Tracks seen in fewer
-//! than `subspace.min_overlap` frames cannot be scored and are labelled
+//! than `subspace.min_overlap` frames that step 7 does not place are labelled
 //! [`Label::Unscored`]. The optional Potts term ([`SegmentConfig::smoothness`]) labels by
 //! iterated conditional modes over the image neighbours.
 //!
@@ -220,6 +227,16 @@ pub struct SegmentConfig {
     /// track belongs to a motion; the groups and their count are still found with the
     /// outlier model, only the final labels differ.
     pub label_outliers: bool,
+    /// Tracks seen in at least this many frames but fewer than `subspace.min_overlap`
+    /// (too short to take part in the search) are judged last against the final groups
+    /// (step 7 of the module documentation), and labelled [`Label::Unscored`] only when no
+    /// group takes them. Values of `min_overlap` or more turn this off; below 3 it is 3 (a
+    /// track of 2 frames has 1 degree of freedom against a subspace). Default 3.
+    pub short_track_frames: usize,
+    /// How much lower (χ² units) a short track's cost `D` under its best group must be than
+    /// under every other group for it to join (a few frames of two motions can explain a
+    /// track almost equally; `2 ln 20 ≈ 6`: 20 to 1 in likelihood). Default 6.
+    pub short_track_margin: f64,
     /// ALS sweeps per refit. Default 15.
     pub refit_sweeps: usize,
     /// Multiplier of the BIC label cost `β_g` (1 = BIC). Default 8.
@@ -267,6 +284,8 @@ impl Default for SegmentConfig {
             merge_max_separation: 30.0,
             merge_gain: 1.6,
             label_outliers: true,
+            short_track_frames: 3,
+            short_track_margin: 6.0,
             refit_sweeps: 15,
             label_cost_scale: 8.0,
             max_group_sigma: 2.0,
@@ -312,6 +331,7 @@ impl SegmentConfig {
             ("merge_ratio", self.merge_ratio),
             ("merge_max_separation", self.merge_max_separation),
             ("merge_gain", self.merge_gain),
+            ("short_track_margin", self.short_track_margin),
             ("max_group_sigma_ratio", self.max_group_sigma_ratio),
         ] {
             if !(v >= 0.0 && v.is_finite()) {
@@ -340,7 +360,9 @@ pub enum Label {
     Object(usize),
     /// Explained by no group better than by chance.
     Outlier,
-    /// Too few frames to be scored (`< subspace.min_overlap`).
+    /// Too few frames to be scored (`< subspace.min_overlap`), and not placed by the
+    /// short-track step ([`SegmentConfig::short_track_frames`]): fewer than 3 frames, or
+    /// no group explains it clearly better than the others and than chance.
     Unscored,
 }
 
@@ -1079,6 +1101,15 @@ fn segment_tracks<R: Rng + ?Sized>(
             pieces: piece.pieces,
         });
     }
+    // 7. Tracks too short for the search, judged against the final groups.
+    let short = short_track_labels(ts, &objects, &scored, shared, &info, area, cfg);
+    for (p, g) in short {
+        labels[p] = Label::Object(g);
+        objects[g].tracks.push(p);
+    }
+    for o in &mut objects {
+        o.tracks.sort_unstable();
+    }
     let members: Vec<&Vec<usize>> = objects.iter().map(|o| &o.tracks).collect();
     let separation = least_separation(&members, |i, p| finals_chi[i][p].unwrap_or(f64::INFINITY));
     Ok(Segmentation {
@@ -1534,6 +1565,100 @@ fn ungrouped<'a>(scored: &[bool], groups: impl Iterator<Item = &'a Vec<usize>>) 
         .collect()
 }
 
+/// Step 7 of the module documentation: each track seen in at least
+/// [`SegmentConfig::short_track_frames`] frames but fewer than `min_overlap` (not scored by
+/// the search) fitted, untrimmed, to every final group whose subspace is defined on all its
+/// `k` frames: `ν = 2k − 3`, `D_g = ν r²_g / σ_g² + 2k ln σ_g²` as in `E`. It joins the group
+/// `g*` of least `D` when, with `label_outliers`, the fit passes the χ² test `ν r²/σ² ≤
+/// χ²_ν(0.999)` (a random walk over a few frames is not told from a body by the outlier
+/// model alone) and `D_g* < D_outlier`; and, either way, when every other group's `D` is at
+/// least [`SegmentConfig::short_track_margin`] higher (a few frames of two motions can
+/// explain a track almost equally). Returns `(track, group)` pairs. O(K k) per track.
+fn short_track_labels(
+    ts: &TrackSubspace,
+    objects: &[ObjectGroup],
+    scored: &[bool],
+    shared: Option<f64>,
+    info: &TrackInfo<'_>,
+    area: f64,
+    cfg: &SegmentConfig,
+) -> Vec<(usize, usize)> {
+    let min_k = cfg.short_track_frames.max(3);
+    if objects.is_empty() || min_k >= ts.min_overlap() {
+        return Vec::new();
+    }
+    let s2: Vec<f64> = objects
+        .iter()
+        .map(|o| shared.unwrap_or(o.sigma * o.sigma).max(info.sigma2_floor))
+        .collect();
+    let ln_area = (area / (2.0 * std::f64::consts::PI)).ln();
+    // Each group's extent: the mean and inverse covariance of its tracks' affine
+    // coordinates (from their fits to its subspace).
+    let extent: Vec<Option<(nalgebra::Vector3<f64>, nalgebra::Matrix3<f64>)>> = objects
+        .par_iter()
+        .map(|o| {
+            let coords: Vec<nalgebra::Vector3<f64>> = o
+                .tracks
+                .iter()
+                .filter_map(|&p| ts.track_fit(&o.model, p))
+                .map(|fit| nalgebra::Vector3::from(fit.s))
+                .collect();
+            if coords.len() < 4 {
+                return None;
+            }
+            let mean = coords.iter().sum::<nalgebra::Vector3<f64>>() / coords.len() as f64;
+            let cov = coords
+                .iter()
+                .map(|c| (c - mean) * (c - mean).transpose())
+                .sum::<nalgebra::Matrix3<f64>>()
+                / (coords.len() - 1) as f64;
+            Some((mean, cov.try_inverse()?))
+        })
+        .collect();
+    let max_d2 = crate::robust::chi2_quantile(3.0, 0.999);
+    (0..scored.len())
+        .into_par_iter()
+        .filter(|&p| !scored[p] && ts.frames_of(p).len() >= min_k)
+        .filter_map(|p| {
+            let frames = ts.frames_of(p);
+            let k = frames.len() as f64;
+            let nu = 2.0 * k - 3.0;
+            // (group, D, χ² = ν r²/σ²) of each group that scores the track.
+            let mut d: Vec<(usize, f64, f64)> = objects
+                .iter()
+                .enumerate()
+                .filter(|(_, o)| frames.iter().all(|&f| o.model.defined[f as usize]))
+                .filter_map(|(g, o)| {
+                    let s = ts.ls_coords(&o.model, p, frames)?;
+                    // A point of the body lies within the body: over a few frames the
+                    // subspace explains almost any short motion by a point far outside
+                    // it.
+                    let (mean, inv) = extent[g].as_ref()?;
+                    let e = nalgebra::Vector3::from(s) - mean;
+                    if (e.transpose() * inv * e)[0] > max_d2 {
+                        return None;
+                    }
+                    let ss: f64 = frames
+                        .iter()
+                        .map(|&f| ts.dist2(&o.model, p, f as usize, &s))
+                        .sum();
+                    let chi = ss / s2[g];
+                    Some((g, chi + 2.0 * k * s2[g].ln(), chi))
+                })
+                .collect();
+            d.sort_by(|a, b| a.1.total_cmp(&b.1));
+            let &(g, d_best, chi) = d.first()?;
+            if d.get(1)
+                .is_some_and(|x| x.1 - d_best < cfg.short_track_margin)
+            {
+                return None;
+            }
+            let fits = chi <= crate::robust::chi2_quantile(nu, 0.999) && d_best < 2.0 * k * ln_area;
+            (fits || !cfg.label_outliers).then_some((p, g))
+        })
+        .collect()
+}
+
 /// Tracks labelled outlier judged again against `n_groups` groups, as in `E`: track
 /// `candidates[i]` joins the group `g` with the least `D = ν r² / σ² + 2 k ln σ²` when that
 /// is below its outlier cost; `cost(g, i)` gives its `ν r²` and the group's `σ²` (`None`:
@@ -1809,6 +1934,9 @@ pub fn other_objects<R: Rng + ?Sized>(
     let cfg = &SegmentConfig {
         spectral: false,
         merge_ratio: 0.0,
+        // Nor short tracks given to the groups of junk: they stay with the main body's
+        // judgement.
+        short_track_frames: usize::MAX,
         ..cfg.clone()
     };
     let seg = match segment_tracks(&ts, cfg, rng, Instant::now()) {

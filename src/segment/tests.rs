@@ -486,3 +486,76 @@ fn neighbour_lists_are_the_k_nearest_and_sized_k() {
         k * meas.n_points()
     );
 }
+
+/// Tracks seen in only 3–4 frames (fewer than `min_overlap`) take no part in the search;
+/// step 7 gives them to the group that explains them, and never a random walk.
+#[test]
+fn short_tracks_join_their_group_and_short_walks_do_not() {
+    let f = 30;
+    let sizes = [(60, Motion::General), (40, Motion::General)];
+    let (meas, truth) = scene(f, &sizes, 12, 0.5, 0.0, 11);
+    let n = truth.len();
+    // Every third object track and every walk cut to a window of 3 or 4 frames.
+    let mut visible = meas.visible.clone();
+    let mut rng = StdRng::seed_from_u64(5);
+    let short: Vec<usize> = (0..n).filter(|&p| truth[p] < 0 || p % 3 == 0).collect();
+    for &p in &short {
+        let len = 3 + (p % 2);
+        let start = rng.random_range(0..=f - len);
+        for fr in 0..f {
+            visible[fr * n + p] = (start..start + len).contains(&fr);
+        }
+    }
+    let meas = Measurements::new(meas.w.clone(), visible);
+    let run = |short_track_frames| {
+        segment(
+            &meas,
+            &SegmentConfig {
+                short_track_frames,
+                ..SegmentConfig::default()
+            },
+            &mut StdRng::seed_from_u64(7),
+        )
+        .unwrap()
+    };
+    let off = run(5);
+    assert!(short.iter().all(|&p| off.labels[p] == Label::Unscored));
+    let seg = run(SegmentConfig::default().short_track_frames);
+    assert_eq!(seg.objects.len(), 2);
+    // Each found group's true object, by the majority of its long tracks.
+    let truth_of = |g: usize| {
+        let long = |t| {
+            seg.objects[g]
+                .tracks
+                .iter()
+                .filter(|&&p| !short.contains(&p) && truth[p] == t)
+                .count()
+        };
+        if long(0) >= long(1) { 0 } else { 1 }
+    };
+    let (mut right, mut wrong) = (0, 0);
+    for &p in short.iter().filter(|&&p| truth[p] >= 0) {
+        if let Label::Object(g) = seg.labels[p] {
+            if truth_of(g) == truth[p] {
+                right += 1;
+            } else {
+                wrong += 1;
+            }
+        }
+    }
+    let objects_short = short.iter().filter(|&&p| truth[p] >= 0).count();
+    assert_eq!(wrong, 0, "short tracks given the wrong group");
+    assert!(
+        right * 10 >= objects_short * 8,
+        "{right} of {objects_short} short object tracks placed"
+    );
+    let walks_placed = (0..n)
+        .filter(|&p| truth[p] < 0 && matches!(seg.labels[p], Label::Object(_)))
+        .count();
+    assert_eq!(walks_placed, 0, "short random walks given a group");
+    // The groups' member lists hold the short tracks they took.
+    for (g, o) in seg.objects.iter().enumerate() {
+        assert!(o.tracks.windows(2).all(|w| w[0] < w[1]));
+        assert!(o.tracks.iter().all(|&p| seg.labels[p] == Label::Object(g)));
+    }
+}
