@@ -104,7 +104,8 @@
 //! each round O(K · H · N) for the label search plus O(K · n_obs) per ALS sweep of the
 //! refits and O(K² · n_obs) for the merge tests; the spectral step O(n²·H + n³) on
 //! `n ≤ 1500` tracks; step 6 one perspective fit per pair tested (at most `K(K−1)/2`, then
-//! `K` per merge), each linear in the pair's observations per adjustment iteration.
+//! `K` per merge), each linear in the pair's observations per adjustment iteration; step 7
+//! one track fit per grouped track (the groups' extents) and O(K k) per short track.
 //! Nothing is dense in F×N beyond what
 //! [`TrackSubspace`] itself holds. The O(N²) neighbour pre-selection dominates beyond
 //! ~10⁴ tracks (see the long-video issue for a spatial index).
