@@ -559,3 +559,29 @@ fn short_tracks_join_their_group_and_short_walks_do_not() {
         assert!(o.tracks.iter().all(|&p| seg.labels[p] == Label::Object(g)));
     }
 }
+
+/// A small object (24 tracks beside 250) is a group of its own even when a random walk or
+/// two land in it: the bound on a group's noise is judged on its typical track, not on a
+/// mean that one walk carries above the bound (before: labelled outliers).
+#[test]
+fn small_object_holding_a_walk_is_still_a_group() {
+    let sizes = [(250, Motion::General), (24, Motion::General)];
+    let (meas, truth) = scene(30, &sizes, 15, 0.5, 0.0, 21);
+    let seg = segment(
+        &meas,
+        &SegmentConfig::default(),
+        &mut StdRng::seed_from_u64(7),
+    )
+    .unwrap();
+    assert_eq!(
+        seg.objects.len(),
+        2,
+        "groups found: {:?}",
+        seg.objects
+            .iter()
+            .map(|o| o.tracks.len())
+            .collect::<Vec<_>>()
+    );
+    let err = error_on_objects(&seg, &truth);
+    assert!(err <= 0.02, "misclassification {err}");
+}
