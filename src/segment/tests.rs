@@ -101,6 +101,19 @@ fn scene(
     (Measurements::new(w, visible), truth)
 }
 
+/// [`segment`] with the default settings (RNG seed 7), checked to find `k` groups.
+fn segment_with_count(meas: &Measurements, k: usize) -> Segmentation {
+    let seg = segment(
+        meas,
+        &SegmentConfig::default(),
+        &mut StdRng::seed_from_u64(7),
+    )
+    .unwrap();
+    let sizes: Vec<usize> = seg.objects.iter().map(|o| o.tracks.len()).collect();
+    assert_eq!(seg.objects.len(), k, "groups found: {sizes:?}");
+    seg
+}
+
 fn truth_groups(truth: &[i64]) -> Vec<usize> {
     truth
         .iter()
@@ -155,21 +168,7 @@ fn noisy_partial_scene_with_translating_object_and_random_walks() {
         (30, Motion::General),
     ];
     let (meas, truth) = scene(40, &sizes, 10, 0.5, 0.4, 3);
-    let seg = segment(
-        &meas,
-        &SegmentConfig::default(),
-        &mut StdRng::seed_from_u64(7),
-    )
-    .unwrap();
-    assert_eq!(
-        seg.objects.len(),
-        3,
-        "groups found: {:?}",
-        seg.objects
-            .iter()
-            .map(|o| o.tracks.len())
-            .collect::<Vec<_>>()
-    );
+    let seg = segment_with_count(&meas, 3);
     let err = error_on_objects(&seg, &truth);
     assert!(err <= 0.05, "misclassification {err}");
     // Every random walk is an outlier, and (almost) no object track is.
@@ -567,21 +566,7 @@ fn short_tracks_join_their_group_and_short_walks_do_not() {
 fn small_object_holding_a_walk_is_still_a_group() {
     let sizes = [(250, Motion::General), (24, Motion::General)];
     let (meas, truth) = scene(30, &sizes, 15, 0.5, 0.0, 21);
-    let seg = segment(
-        &meas,
-        &SegmentConfig::default(),
-        &mut StdRng::seed_from_u64(7),
-    )
-    .unwrap();
-    assert_eq!(
-        seg.objects.len(),
-        2,
-        "groups found: {:?}",
-        seg.objects
-            .iter()
-            .map(|o| o.tracks.len())
-            .collect::<Vec<_>>()
-    );
+    let seg = segment_with_count(&meas, 2);
     let err = error_on_objects(&seg, &truth);
     assert!(err <= 0.02, "misclassification {err}");
 }
