@@ -85,9 +85,11 @@
 //!    perspective cameras, as in step 5. See `perspective`.
 //! 7. **Short tracks** (seen in 3 to `subspace.min_overlap − 1` frames, too few for the
 //!    search: `short_track_frames`): each is fitted, untrimmed, to every final group whose
-//!    subspace covers its frames, and joins the one of least `D_p(g)` when that passes a
-//!    χ² test at 0.999 and beats the outlier model (as in `E`), and every other group's
-//!    `D_p` is at least [`SegmentConfig::short_track_margin`] higher. Half the tracks of
+//!    subspace covers its frames and within whose extent its affine coordinates lie
+//!    (Mahalanobis distance to the group's tracks' coordinates at most `χ²₃(0.999)`), and
+//!    joins the one of least `D_p(g)` when that passes a χ² test at 0.999 and beats the
+//!    outlier model (as in `E`), and every other such group's `D_p` is at least
+//!    [`SegmentConfig::short_track_margin`] higher. Half the tracks of
 //!    a video whose tracks enter and leave can be this short (docs/results.md). The groups'
 //!    subspaces are not refitted to them.
 //!
@@ -1586,7 +1588,10 @@ fn ungrouped<'a>(scored: &[bool], groups: impl Iterator<Item = &'a Vec<usize>>) 
 /// Step 7 of the module documentation: each track seen in at least
 /// [`SegmentConfig::short_track_frames`] frames but fewer than `min_overlap` (not scored by
 /// the search) fitted, untrimmed, to every final group whose subspace is defined on all its
-/// `k` frames: `ν = 2k − 3`, `D_g = ν r²_g / σ_g² + 2k ln σ_g²` as in `E`. It joins the group
+/// `k` frames and within whose extent its coordinates `s` lie (`(s − s̄)ᵀ C⁻¹ (s − s̄) ≤
+/// χ²₃(0.999)`, `s̄` and `C` the mean and covariance of the group's tracks' coordinates:
+/// over a few frames a turning body's subspace explains almost any short motion by a point
+/// far outside the body): `ν = 2k − 3`, `D_g = ν r²_g / σ_g² + 2k ln σ_g²` as in `E`. It joins the group
 /// `g*` of least `D` when, with `label_outliers`, the fit passes the χ² test `ν r²/σ² ≤
 /// χ²_ν(0.999)` (a random walk over a few frames is not told from a body by the outlier
 /// model alone) and `D_g* < D_outlier`; and, either way, when every other group's `D` is at
