@@ -390,16 +390,11 @@ fn main() {
             // the true tracks' misclassification is scored.
             let (all, _) = run_labelled(&h, Objects::Auto, seed, false);
             err_all_sum += misclassification(&all.codes()[..n0], &h0.groups);
-            unscored_sum += seg.labels[..n0]
-                .iter()
-                .filter(|l| **l == Label::Unscored)
-                .count() as f64
-                / n0 as f64;
-            outlier_sum += seg.labels[..n0]
-                .iter()
-                .filter(|l| **l == Label::Outlier)
-                .count() as f64
-                / n0 as f64;
+            let share = |label: Label| {
+                seg.labels[..n0].iter().filter(|l| **l == label).count() as f64 / n0 as f64
+            };
+            unscored_sum += share(Label::Unscored);
+            outlier_sum += share(Label::Outlier);
             let flagged: Vec<bool> = seg
                 .labels
                 .iter()

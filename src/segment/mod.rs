@@ -495,24 +495,24 @@ impl TrackInfo<'_> {
     /// residual sum over its degrees of freedom once the subspace's own parameters are
     /// counted (a subspace fitted to few tracks fits them too well otherwise).
     fn sigma2_of(&self, model: &AffineSubspace, chi: &[Option<f64>], set: &[usize]) -> Option<f64> {
-        let (mut ss, mut dof) = (0.0, 0.0);
-        for &p in set {
-            ss += chi[p]?;
-            dof += self.nu[p];
-        }
-        let dof = dof - (8.0 * model.n_defined() as f64 - 9.0).max(0.0);
-        let s2 = ss / dof;
         // The bound on a group's noise (`max_group_sigma`) is judged on its typical track,
         // the median of `r²_p`: a few random walks a group of a body holds would carry the
         // mean above it, and keep two pieces of one body from merging (Hopkins `cars4`
         // with half its entries hidden: the unions of its pieces at a mean σ of 2.3–2.9 px
         // from the walks they held; docs/results.md). A set of random walks has no
         // typical track within the bound.
-        let r2: Vec<f64> = set
-            .iter()
-            .filter(|&&p| self.nu[p] > 0.0)
-            .map(|&p| chi[p].unwrap_or(f64::INFINITY) / self.nu[p])
-            .collect();
+        let (mut ss, mut dof) = (0.0, 0.0);
+        let mut r2 = Vec::with_capacity(set.len());
+        for &p in set {
+            let c = chi[p]?;
+            ss += c;
+            dof += self.nu[p];
+            if self.nu[p] > 0.0 {
+                r2.push(c / self.nu[p]);
+            }
+        }
+        let dof = dof - (8.0 * model.n_defined() as f64 - 9.0).max(0.0);
+        let s2 = ss / dof;
         let typical = if r2.is_empty() {
             s2
         } else {
@@ -1122,7 +1122,7 @@ fn segment_tracks<R: Rng + ?Sized>(
         });
     }
     // 7. Tracks too short for the search, judged against the final groups.
-    let short = short_track_labels(ts, &objects, &scored, shared, &info, area, cfg);
+    let short = short_track_labels(ts, &objects, &scored, shared, &info, &outlier, cfg);
     for (p, g) in short {
         labels[p] = Label::Object(g);
         objects[g].tracks.push(p);
@@ -1603,7 +1603,7 @@ fn short_track_labels(
     scored: &[bool],
     shared: Option<f64>,
     info: &TrackInfo<'_>,
-    area: f64,
+    outlier: &[f64],
     cfg: &SegmentConfig,
 ) -> Vec<(usize, usize)> {
     let min_k = cfg.short_track_frames.max(3);
@@ -1614,7 +1614,6 @@ fn short_track_labels(
         .iter()
         .map(|o| shared.unwrap_or(o.sigma * o.sigma).max(info.sigma2_floor))
         .collect();
-    let ln_area = (area / (2.0 * std::f64::consts::PI)).ln();
     // Each group's extent: the mean and inverse covariance of its tracks' affine
     // coordinates (from their fits to its subspace).
     let extent: Vec<Option<(nalgebra::Vector3<f64>, nalgebra::Matrix3<f64>)>> = objects
@@ -1676,7 +1675,9 @@ fn short_track_labels(
             {
                 return None;
             }
-            let fits = chi <= crate::robust::chi2_quantile(nu, 0.999) && d_best < 2.0 * k * ln_area;
+            // `outlier[p]` is the outlier cost `2 k ln(A / 2π)` over all `k` of its frames,
+            // every one of which the group covers.
+            let fits = chi <= crate::robust::chi2_quantile(nu, 0.999) && d_best < outlier[p];
             (fits || !cfg.label_outliers).then_some((p, g))
         })
         .collect()
