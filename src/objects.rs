@@ -53,7 +53,8 @@ pub struct MultiBodyReport {
     /// Number of groups found.
     pub n_objects: usize,
     /// Which rule set that number: `"given"`, `"label_cost"`, `"eigengap"`,
-    /// `"separation"` or `"perspective_merge"` (docs/math.md §11).
+    /// `"separation"`, `"perspective_merge"` or `"windows"` (a long sequence of short tracks
+    /// segmented window by window; docs/math.md §11).
     pub count_rule: crate::segment::CountRule,
     /// The least separated pair of groups' median ratio of a track's RMS under the other
     /// group's subspace to that under its own; `null` with one group.
@@ -70,7 +71,8 @@ pub struct MultiBodyReport {
     pub sigma_px: f64,
     /// Final energy (χ² units).
     pub energy: f64,
-    /// Label cost of one object defined on every frame (χ² units; 0 with a given count).
+    /// Label cost of one object defined on every frame (χ² units; 0 with a given count or
+    /// windows).
     pub label_cost: f64,
     /// Hypotheses in the pool at the end.
     pub hypotheses: usize,
