@@ -21,16 +21,23 @@
 //!    when each is the other's best match by the number of tracks labelled `g` in `k` and
 //!    `h` in `k + 1` (the tracks crossing the overlap), and those tracks are at least 3 and
 //!    a quarter of the smaller of the two groups' tracks scored in both windows. A group
-//!    without a link starts a new object. Mutual best matches keep a window where two
-//!    bodies could not be told apart from joining their chains.
+//!    without a link is matched the same way to a group of window `k − 1` that no group of
+//!    `k` continued (across one window that held two bodies in one group), else starts a
+//!    new object. Mutual best matches keep a window where two bodies could not be told
+//!    apart from joining their chains.
 //! 4. **Labels**: each track takes its windows' majority (an object, or outlier); ties go
 //!    to the window whose centre is nearest the track's middle frame. Objects with fewer
 //!    than `min_group_tracks` tracks are dissolved into outliers.
 //! 5. **Each object's subspace on every frame**: its window pieces' subspaces chained into
 //!    the first piece's affine frame — consecutive pieces related by the affine map
 //!    `s ↦ A s + b` between their shared tracks' coordinates (least squares), a piece's
-//!    cameras `M A⁻¹`, offsets `t − M A⁻¹ b` — then refitted to its tracks by ALS. Its RMS,
-//!    noise and the groups' separation are measured under it.
+//!    cameras `M A⁻¹`, offsets `t − M A⁻¹ b` — then refitted to its tracks by ALS (the
+//!    refit kept unless it loses frames the chain defined).
+//! 6. **Broken chains merged**: while two objects' separation (the median over their
+//!    tracks of `r_other / r_own` under these subspaces) is below
+//!    [`SegmentConfig::window_merge_separation`], they are one body whose chain broke
+//!    (a window that split it), and merge. The objects' RMS, noise and separation are
+//!    measured under the final subspaces.
 //!
 //! # Complexity
 //!
@@ -40,7 +47,8 @@
 //! length and density. Choosing each window's tracks `O(W · N log k)` (a binary search in
 //! every track's frames per window); links `O(Σ_k n_k)`; labels `O(n_obs)`; the stitching
 //! one ALS refit per object. Memory: one window's segmentation at a time, plus the labels of
-//! every window (about 2–3 per track).
+//! every window (about 2–3 per track), beside the dense `2F × N` estimator over all tracks
+//! that [`super::segment`] builds (for the windows' plan, the stitching and the scores).
 
 use std::time::Instant;
 
@@ -95,7 +103,6 @@ pub(super) fn plan(ts: &TrackSubspace, cfg: &SegmentConfig) -> Option<Vec<(usize
 /// One window's group: its tracks (input indices, sorted) and its subspace on the input's
 /// frames (defined on the window's only).
 struct Piece {
-    window: usize,
     tracks: Vec<usize>,
     model: AffineSubspace,
     pieces: usize,
@@ -116,7 +123,7 @@ pub(super) fn segment_windows<R: Rng + ?Sized>(
     let mut groups_in: Vec<Vec<Piece>> = Vec::with_capacity(windows.len());
     let (mut energy, mut hypotheses, mut rounds, mut converged) = (0.0, 0, 0, true);
     let mut merge_tests = Vec::new();
-    for (w, &(a, b)) in windows.iter().enumerate() {
+    for &(a, b) in windows {
         let frames: Vec<usize> = (a..b).collect();
         let tracks: Vec<usize> = (0..n)
             .filter(|&p| {
@@ -147,7 +154,6 @@ pub(super) fn segment_windows<R: Rng + ?Sized>(
             seg.objects
                 .into_iter()
                 .map(|o| Piece {
-                    window: w,
                     tracks: o.tracks.iter().map(|&j| tracks[j]).collect(),
                     model: embed(&o.model, a, nf),
                     pieces: o.pieces,
@@ -445,7 +451,8 @@ fn embed(m: &AffineSubspace, a: usize, nf: usize) -> AffineSubspace {
     out
 }
 
-/// One object's pieces (in window order) chained into the first one's affine frame (step
+/// One object's pieces (in window order, one per window: links match each group once)
+/// chained into the first one's affine frame (step
 /// 5): each next piece mapped by the affine map between the coordinates of the tracks it
 /// shares with the previous one, its frames not yet defined taken over. The chain stops at
 /// a piece that shares fewer than 4 tracks, or an ill-conditioned map, with the previous.
@@ -454,9 +461,6 @@ fn stitch(ts: &TrackSubspace, pieces: &[&Piece]) -> AffineSubspace {
     let mut prev = pieces[0].model.clone();
     let mut prev_tracks = &pieces[0].tracks;
     for piece in &pieces[1..] {
-        if piece.window == pieces[0].window {
-            continue;
-        }
         // s_prev ≈ A s + b over the shared tracks: four unknowns per coordinate of s_prev.
         let mut ata = Matrix4::<f64>::zeros();
         let mut atb = [Vector4::<f64>::zeros(); 3];
