@@ -162,6 +162,8 @@ fn metric_start(
             rms_before_px: f64::NAN,
             rms_after_px: m.rms_px,
             seconds: metric_s,
+            linear_solver: None,
+            cg_iterations: 0,
         },
     );
     Ok(fit)

@@ -412,6 +412,10 @@ pub struct StageRecord {
     pub rms_after_px: f64,
     #[serde(deserialize_with = "nullable")]
     pub seconds: f64,
+    #[serde(default)]
+    pub linear_solver: Option<crate::projective::bundle::LinearSolver>,
+    #[serde(default)]
+    pub cg_iterations: usize,
 }
 
 /// `projective`.

@@ -244,10 +244,14 @@ pub fn print_report(rec: &Reconstruction) {
         );
     }
     if let Some(p) = &rec.projective {
+        let solver = if p.schur_nnz == 0 {
+            "reduced camera system solved by conjugate gradients, not formed".to_string()
+        } else {
+            format!("{} non-zeros in the reduced camera system", p.schur_nnz)
+        };
         detail!(
-            "projective: started from {}, {} non-zeros in the reduced camera system, RMS {:.6} px",
+            "projective: started from {}, {solver}, RMS {:.6} px",
             spelled(&p.start),
-            p.schur_nnz,
             p.rms_px
         );
         for s in &p.stages {
@@ -260,12 +264,17 @@ pub fn print_report(rec: &Reconstruction) {
                 continue;
             }
             info!(
-                "projective {}: RMS {:.6} → {:.6} px ({}, {} iterations, {:.3} s)",
+                "projective {}: RMS {:.6} → {:.6} px ({}, {} iterations{}, {:.3} s)",
                 s.stage,
                 s.rms_before_px,
                 s.rms_after_px,
                 spelled(&s.status),
                 s.iterations,
+                if s.cg_iterations > 0 {
+                    format!(", {} conjugate-gradient products", s.cg_iterations)
+                } else {
+                    String::new()
+                },
                 s.seconds
             );
         }

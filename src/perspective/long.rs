@@ -114,6 +114,8 @@ pub fn fit_observations(
             rms_before_px: f64::NAN,
             rms_after_px: f64::NAN,
             seconds,
+            linear_solver: None,
+            cg_iterations: 0,
         },
     );
     Ok(out)

@@ -1068,6 +1068,69 @@ mod tests {
         (proj, Measurements::complete(w))
     }
 
+    /// The metric adjustment with a shared focal length (an unknown coupled to every
+    /// camera in the reduced system) and the principal point estimated gives the same
+    /// optimum whether the reduced system is factorized or solved by conjugate gradients.
+    #[test]
+    fn the_iterative_reduced_solver_matches_the_direct_one() {
+        use crate::projective::bundle::LinearSolver;
+        let (nf, np) = (16, 80);
+        let (proj, meas) = noisy(nf, np, 0.5);
+        // `noisy`'s cameras are K [R_f | t] with K = diag(500, 500, 1), R_f a rotation
+        // about y by 0.05 f and t = (3.2, 2.4, 5); started at a focal length of 520 px.
+        let start = PerspectiveModel {
+            focal_px: vec![520.0; nf],
+            principal_point: [0.0, 0.0],
+            k1: 0.0,
+            aspect: 1.0,
+            rotations: (0..nf)
+                .map(|f| {
+                    let (s, c) = (0.05 * f as f64).sin_cos();
+                    Matrix3::new(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c)
+                })
+                .collect(),
+            translations: vec![Vector3::new(3.2, 2.4, 5.0); nf],
+            points: proj
+                .points
+                .iter()
+                .map(|x| Vector3::new(x[0], x[1], x[2]))
+                .collect(),
+        };
+        let adjust_with = |solver: LinearSolver| {
+            let mut cfg = PerspectiveConfig {
+                intrinsics: Intrinsics {
+                    principal_point: Some([0.0, 0.0]),
+                    ..Intrinsics::default()
+                },
+                estimate_principal_point: true,
+                ..PerspectiveConfig::default()
+            };
+            cfg.bundle.linear_solver = solver;
+            adjust(&meas, &start, &cfg, 0, &mut crate::NoopObserver).unwrap()
+        };
+        let (d, i) = (
+            adjust_with(LinearSolver::Direct),
+            adjust_with(LinearSolver::Iterative),
+        );
+        assert!(d.rms_px > 0.2 && d.rms_px < 0.5, "rms {}", d.rms_px);
+        assert!(
+            (d.rms_px - i.rms_px).abs() <= 1e-7 * d.rms_px,
+            "{} vs {}",
+            d.rms_px,
+            i.rms_px
+        );
+        assert!(
+            (d.model.focal_px[0] - 500.0).abs() < 10.0,
+            "{}",
+            d.model.focal_px[0]
+        );
+        assert!((d.model.focal_px[0] - i.model.focal_px[0]).abs() < 1e-4);
+        for s in &i.stages {
+            assert_eq!(s.linear_solver, Some(LinearSolver::Iterative), "{s:?}");
+            assert!(s.cg_iterations > 0, "{s:?}");
+        }
+    }
+
     #[test]
     fn early_acceptance_is_a_noise_level_bound() {
         let (nf, np) = (12, 60);

@@ -100,6 +100,8 @@ use rayon::prelude::*;
 use crate::completion::linalg;
 use crate::{Event, Observer, SolverReport, SolverStatus};
 
+pub mod implicit;
+
 /// A residual model: what one observation contributes, and the parameter manifolds.
 ///
 /// Jacobians are row-major, with respect to the *stored* parameters; the engine maps them
@@ -334,6 +336,54 @@ pub struct LmConfig {
     /// to rounding. Default true (measured: docs/results.md, fourteenth session).
     #[serde(default = "default_dense_schur")]
     pub dense_schur: bool,
+    /// How the reduced camera system is solved: `direct` (sparse Cholesky), `iterative`
+    /// (conjugate gradients on the system applied observation by observation, never
+    /// formed; [`implicit`]) or `auto`, iterative when the system or its factor would
+    /// outgrow the linearization ([`ITERATIVE_FILL`]). Default `auto`.
+    #[serde(default)]
+    pub linear_solver: LinearSolver,
+    /// Conjugate gradients stop when the reduced system's residual is this fraction of
+    /// its right-hand side (`η` of an inexact Newton step). Default 1e-6 (measured:
+    /// docs/results.md).
+    #[serde(default = "default_cg_tolerance")]
+    pub cg_tolerance: f64,
+    /// Cap on conjugate-gradient products per solve. Default 500.
+    #[serde(default = "default_cg_max_iterations")]
+    pub cg_max_iterations: usize,
+}
+
+/// How [`minimize`] solves the reduced camera system ([`LmConfig::linear_solver`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LinearSolver {
+    /// Iterative when the system's non-zeros would exceed [`ITERATIVE_FILL`] times the
+    /// linearization's numbers, direct otherwise.
+    #[default]
+    Auto,
+    /// Sparse Cholesky of the formed system (fill-reducing ordering).
+    Direct,
+    /// Preconditioned conjugate gradients on the implicit system ([`implicit`]).
+    Iterative,
+}
+
+/// [`LinearSolver::Auto`] goes iterative when the reduced system's non-zeros (lower
+/// triangle, estimated from the camera graph before anything is formed) or its Cholesky
+/// factor's exceed this many times the numbers the linearization stores (`n_obs · m (c +
+/// 1 + k + d)`). So the direct path's memory stays within a constant times the
+/// observations', and it is kept where it is fast: where the factor is small next to
+/// the linearization, a factorization costs less than the tens to hundreds of products
+/// (each reading the linearization twice) that conjugate gradients take per solve.
+/// Measured (docs/results.md): at a ratio of 2.4 (Wilshire, 190 frames with long
+/// tracks) the iterative solver took 3 times as long per start, at 4.5 (a 400-frame
+/// handheld arc) 0.86 times.
+pub const ITERATIVE_FILL: f64 = 3.0;
+
+fn default_cg_tolerance() -> f64 {
+    1e-6
+}
+
+fn default_cg_max_iterations() -> usize {
+    500
 }
 
 fn default_lambda_decrease() -> f64 {
@@ -389,6 +439,15 @@ impl LmConfig {
                 self.lambda_decrease
             ));
         }
+        if !(self.cg_tolerance > 0.0 && self.cg_tolerance < 1.0) {
+            return bad(format!(
+                "cg_tolerance {} is not in (0, 1)",
+                self.cg_tolerance
+            ));
+        }
+        if self.cg_max_iterations == 0 {
+            return bad("cg_max_iterations must be at least 1".into());
+        }
         Ok(())
     }
 
@@ -423,6 +482,9 @@ impl Default for LmConfig {
             window_relative_tolerance: 1e-6,
             decrement_tolerance: default_decrement_tolerance(),
             dense_schur: true,
+            linear_solver: LinearSolver::Auto,
+            cg_tolerance: default_cg_tolerance(),
+            cg_max_iterations: default_cg_max_iterations(),
         }
     }
 }
@@ -521,23 +583,36 @@ impl Factor {
     }
 }
 
-impl Pattern {
-    fn new(g: &Graph, c: usize, k: usize, dense: bool) -> Result<Self, String> {
-        let (cptr, cpts) = g.by_camera();
-        let mut mark = vec![usize::MAX; g.n_cams];
-        let mut nbrs = vec![Vec::new(); g.n_cams];
-        for cam in 0..g.n_cams {
-            for &p in &cpts[cptr[cam]..cptr[cam + 1]] {
-                for o in g.track(p) {
-                    let f = g.cam[o];
-                    if f > cam && mark[f] != cam {
-                        mark[f] = cam;
-                        nbrs[cam].push(f);
-                    }
+/// Per camera `g`, the cameras `f > g` that share a track with it (sorted): the
+/// off-diagonal blocks of the reduced system's lower triangle. `O(Σ_p k_p²)` time, `O(F)`
+/// beyond the output.
+fn neighbours(g: &Graph) -> Vec<Vec<usize>> {
+    let (cptr, cpts) = g.by_camera();
+    let mut mark = vec![usize::MAX; g.n_cams];
+    let mut nbrs = vec![Vec::new(); g.n_cams];
+    for cam in 0..g.n_cams {
+        for &p in &cpts[cptr[cam]..cptr[cam + 1]] {
+            for o in g.track(p) {
+                let f = g.cam[o];
+                if f > cam && mark[f] != cam {
+                    mark[f] = cam;
+                    nbrs[cam].push(f);
                 }
             }
-            nbrs[cam].sort_unstable();
         }
+        nbrs[cam].sort_unstable();
+    }
+    nbrs
+}
+
+impl Pattern {
+    fn new(
+        g: &Graph,
+        nbrs: Vec<Vec<usize>>,
+        c: usize,
+        k: usize,
+        dense: bool,
+    ) -> Result<Self, String> {
         let n = g.n_cams * c + k;
         let mut col_ptr = Vec::with_capacity(n + 1);
         let mut row_idx = Vec::new();
@@ -699,10 +774,15 @@ pub struct LmResult {
     pub report: SolverReport,
     /// Cost after each accepted step (first entry: the starting cost).
     pub costs: Vec<f64>,
-    /// Non-zeros of the reduced camera system (lower triangle), for the memory figures.
+    /// Non-zeros of the reduced camera system (lower triangle), for the memory figures; 0
+    /// on the iterative path (never formed).
     pub schur_nnz: usize,
     /// Accepted steps that were extended along their path (`extension_trials`).
     pub extensions: usize,
+    /// The solver the reduced systems took (`Direct` or `Iterative`, never `Auto`).
+    pub linear_solver: LinearSolver,
+    /// Conjugate-gradient products over the run (0 for the direct solver).
+    pub cg_iterations: usize,
 }
 
 /// Cost `Σ ‖r‖²` of the current parameters (per-track sums in parallel, added in track
@@ -1893,6 +1973,16 @@ struct Assembled {
     rhs: Mat<f64>,
     dcam: Vec<f64>,
     dglob: Vec<f64>,
+    /// The iterative path's pieces of the system (`None` on the direct path).
+    implicit: Option<ImplicitParts>,
+}
+
+/// The camera and shared blocks of the iterative path's system before the Schur
+/// correction and the damping (full, symmetric), and its undamped block diagonal.
+struct ImplicitParts {
+    ucam: Vec<f64>,
+    ugg: Vec<f64>,
+    blocks: Option<implicit::BlockDiagonal>,
 }
 
 /// Per-track linearisation: `V_p`, `g_p` and the `W` block of each observation.
@@ -1991,8 +2081,44 @@ pub fn minimize_shared<M: BundleModel>(
         model.res_dim(),
     );
     let (nf, np, nobs) = (g.n_cams, g.n_pts, g.n_obs());
-    let pattern = Pattern::new(g, cd, k, cfg.dense_schur)?;
-    let mut factor = Factor::new(&pattern.llt)?;
+    let stride = m * (cd + 1 + k + pd);
+    let nbrs = neighbours(g);
+    // `Auto`: iterative when the reduced system (estimated from the camera graph before
+    // anything is formed) or its Cholesky factor (from the symbolic analysis) would hold
+    // more than `ITERATIVE_FILL` times the linearization's numbers.
+    let too_big = |nnz: usize| nnz as f64 > ITERATIVE_FILL * (nobs * stride) as f64;
+    let mut iterative = match cfg.linear_solver {
+        LinearSolver::Direct => false,
+        LinearSolver::Iterative => true,
+        LinearSolver::Auto => {
+            let pairs: usize = nbrs.iter().map(Vec::len).sum();
+            too_big(pairs * cd * cd + nf * cd * (cd + 1) / 2 + (nf * cd + k) * k)
+        }
+    };
+    // The direct path's pattern; none for the iterative one.
+    let mut pattern = if iterative {
+        drop(nbrs);
+        None
+    } else {
+        Some(Pattern::new(g, nbrs, cd, k, cfg.dense_schur)?)
+    };
+    if cfg.linear_solver == LinearSolver::Auto
+        && pattern.as_ref().is_some_and(|p| too_big(p.llt.len_val()))
+    {
+        iterative = true;
+        pattern = None;
+    }
+    let mut factor = match pattern.as_ref() {
+        Some(p) => Some(Factor::new(&p.llt)?),
+        None => None,
+    };
+    // The track of each observation (the iterative path's products).
+    let obs_pt: Vec<usize> = if iterative {
+        (0..np).flat_map(|p| g.track(p).map(move |_| p)).collect()
+    } else {
+        Vec::new()
+    };
+    let mut cg_iterations = 0;
     let ns = nf * cd + k;
     let n_res = (nobs * m).max(1) as f64;
     let rms = |c: f64| (c / n_res).sqrt() * progress.rms_scale;
@@ -2032,7 +2158,6 @@ pub fn minimize_shared<M: BundleModel>(
     // tangent space (m × pd), the layout `obs_parts` reads. `W = J_cᵀ J_x` is formed
     // where it is used (the Schur complement, the back-substitution): storing it took 18
     // of 38 numbers per observation for a 6-parameter camera.
-    let stride = m * (cd + 1 + k + pd);
     let mut lin = vec![0.0; nobs * stride];
     // Observations by camera (for the camera blocks, in parallel over cameras).
     let (cam_ptr, cam_obs) = {
@@ -2055,7 +2180,7 @@ pub fn minimize_shared<M: BundleModel>(
     let mut gc = vec![0.0; nf * cd];
     let mut cam_basis = vec![0.0; nf * cl * cd];
     let mut cam_has_basis = vec![false; nf];
-    let mut values = vec![0.0; pattern.nnz()];
+    let mut values = vec![0.0; pattern.as_ref().map_or(0, Pattern::nnz)];
     // The undamped reduced camera system of the current linearization (variable projection).
     let mut base_values: Vec<f64> = Vec::new();
     // At least one slot per camera so that the per-camera zip below visits every camera.
@@ -2234,6 +2359,28 @@ pub fn minimize_shared<M: BundleModel>(
             break;
         }
 
+        // The iterative path's view of one linearization (see `implicit`).
+        macro_rules! implicit {
+            ($vinv:expr, $parts:expr, $dcam:expr, $dglob:expr) => {
+                implicit::Implicit {
+                    g,
+                    lin: &lin,
+                    stride,
+                    dims: (cd, pd, k, m),
+                    lins: &lins,
+                    vinv: $vinv,
+                    cam_ptr: &cam_ptr,
+                    cam_obs: &cam_obs,
+                    obs_pt: &obs_pt,
+                    ucam: &$parts.ucam,
+                    ugf: &ugf,
+                    kc,
+                    ugg: &$parts.ugg,
+                    dcam: $dcam,
+                    dglob: $dglob,
+                }
+            };
+        }
         // Damped solves until a step is accepted.
         let mut assembled: Option<Assembled> = None;
         loop {
@@ -2267,136 +2414,193 @@ pub fn minimize_shared<M: BundleModel>(
                         inv
                     })
                     .collect();
-                // Reduced camera system.
-                values.iter_mut().for_each(|x| *x = 0.0);
-                let mut rhs = Mat::<f64>::zeros(ns, 1);
-                let mut dcam = vec![0.0; nf * cd];
-                let mut dglob = vec![0.0; k];
-                for k1 in 0..k {
-                    for k2 in 0..=k1 {
-                        let v = ugg[k1 * k + k2];
-                        if k1 == k2 {
-                            dglob[k1] = v.max(dfloor);
-                        }
-                        values[pattern.glob(nf, k1, k2)] += v;
-                    }
-                    rhs[(nf * cd + k1, 0)] = -gglob[k1];
-                }
-                for f in 0..nf {
-                    let uf = &u[f * cd * cd..(f + 1) * cd * cd];
-                    for c1 in 0..cd {
-                        for c2 in 0..=c1 {
-                            let v = uf[c1 * cd + c2];
-                            if c1 == c2 {
-                                dcam[f * cd + c1] = v.max(dfloor);
+                if let Some(pattern) = pattern.as_ref() {
+                    // Reduced camera system.
+                    values.iter_mut().for_each(|x| *x = 0.0);
+                    let mut rhs = Mat::<f64>::zeros(ns, 1);
+                    let mut dcam = vec![0.0; nf * cd];
+                    let mut dglob = vec![0.0; k];
+                    for k1 in 0..k {
+                        for k2 in 0..=k1 {
+                            let v = ugg[k1 * k + k2];
+                            if k1 == k2 {
+                                dglob[k1] = v.max(dfloor);
                             }
-                            values[pattern.pos(f, f, c1, c2)] += v;
+                            values[pattern.glob(nf, k1, k2)] += v;
                         }
-                        rhs[(f * cd + c1, 0)] = -gc[f * cd + c1];
-                        for k1 in 0..k {
-                            values[pattern.glob_in_cam(f, c1, k1)] += ugf[f * kc + k1 * cd + c1];
-                        }
+                        rhs[(nf * cd + k1, 0)] = -gglob[k1];
                     }
-                }
-                for (f, kf) in &pins {
-                    for c1 in 0..cd {
-                        for c2 in 0..=c1 {
-                            values[pattern.pos(*f, *f, c1, c2)] += kf[c1 * cd + c2];
-                        }
-                    }
-                }
-                for f in (0..nf).filter(|&f| is_fixed(f)) {
-                    for c1 in 0..cd {
-                        values[pattern.pos(f, f, c1, c1)] +=
-                            1e8 * mean_diag_u.max(f64::MIN_POSITIVE);
-                        rhs[(f * cd + c1, 0)] = 0.0;
-                    }
-                }
-                // S −= W V⁻¹ Wᵀ and rhs += W V⁻¹ g_p, track by track. The columns of frames
-                // a..b are one contiguous run of the CSC values, so the frames are split into
-                // ranges, one per thread, each thread adding every track's share to its own
-                // columns (and to its frames' right-hand sides) in track order: the sums are
-                // those of the sequential loop, whatever the number of threads.
-                // Y_g = W_g V⁻¹ per track (models with shared parameters only): the shared
-                // rows' own block and every range's coupling to them use it.
-                let mut ygs = vec![0.0; np * k * pd];
-                if k > 0 {
-                    ygs.par_chunks_mut(k * pd).enumerate().for_each(|(p, yg)| {
-                        let (vi, wg) = (&vinv[p], &lins[p].wg);
-                        for k1 in 0..k {
-                            for d2 in 0..pd {
-                                yg[k1 * pd + d2] =
-                                    (0..pd).map(|d1| wg[k1 * pd + d1] * vi[d1 * pd + d2]).sum();
+                    for f in 0..nf {
+                        let uf = &u[f * cd * cd..(f + 1) * cd * cd];
+                        for c1 in 0..cd {
+                            for c2 in 0..=c1 {
+                                let v = uf[c1 * cd + c2];
+                                if c1 == c2 {
+                                    dcam[f * cd + c1] = v.max(dfloor);
+                                }
+                                values[pattern.pos(f, f, c1, c2)] += v;
+                            }
+                            rhs[(f * cd + c1, 0)] = -gc[f * cd + c1];
+                            for k1 in 0..k {
+                                values[pattern.glob_in_cam(f, c1, k1)] +=
+                                    ugf[f * kc + k1 * cd + c1];
                             }
                         }
+                    }
+                    for (f, kf) in &pins {
+                        for c1 in 0..cd {
+                            for c2 in 0..=c1 {
+                                values[pattern.pos(*f, *f, c1, c2)] += kf[c1 * cd + c2];
+                            }
+                        }
+                    }
+                    for f in (0..nf).filter(|&f| is_fixed(f)) {
+                        for c1 in 0..cd {
+                            values[pattern.pos(f, f, c1, c1)] +=
+                                1e8 * mean_diag_u.max(f64::MIN_POSITIVE);
+                            rhs[(f * cd + c1, 0)] = 0.0;
+                        }
+                    }
+                    // S −= W V⁻¹ Wᵀ and rhs += W V⁻¹ g_p, track by track. The columns of frames
+                    // a..b are one contiguous run of the CSC values, so the frames are split into
+                    // ranges, one per thread, each thread adding every track's share to its own
+                    // columns (and to its frames' right-hand sides) in track order: the sums are
+                    // those of the sequential loop, whatever the number of threads.
+                    // Y_g = W_g V⁻¹ per track (models with shared parameters only): the shared
+                    // rows' own block and every range's coupling to them use it.
+                    let mut ygs = vec![0.0; np * k * pd];
+                    if k > 0 {
+                        ygs.par_chunks_mut(k * pd).enumerate().for_each(|(p, yg)| {
+                            let (vi, wg) = (&vinv[p], &lins[p].wg);
+                            for k1 in 0..k {
+                                for d2 in 0..pd {
+                                    yg[k1 * pd + d2] =
+                                        (0..pd).map(|d1| wg[k1 * pd + d1] * vi[d1 * pd + d2]).sum();
+                                }
+                            }
+                        });
+                    }
+                    let cam_end = pattern.col_ptr[nf * cd];
+                    let (cam_values, glob_values) = values.split_at_mut(cam_end);
+                    let ranges = frame_ranges(pattern, nf, cd, rayon::current_num_threads());
+                    let mut value_parts: Vec<&mut [f64]> = Vec::with_capacity(ranges.len());
+                    {
+                        let mut rest: &mut [f64] = cam_values;
+                        let mut at = 0;
+                        for &(_, b) in &ranges {
+                            let end = pattern.col_ptr[b * cd];
+                            let (head, tail) = rest.split_at_mut(end - at);
+                            value_parts.push(head);
+                            rest = tail;
+                            at = end;
+                        }
+                    }
+                    let schur_input = SchurInput {
+                        g,
+                        pattern,
+                        dims: (cd, pd, k, m),
+                        lin: &lin,
+                        stride,
+                        lins: &lins,
+                        vinv: &vinv,
+                        ygs: &ygs,
+                    };
+                    let rhs_parts: Vec<Vec<f64>> = ranges
+                        .par_iter()
+                        .zip(value_parts.into_par_iter())
+                        .map(|(&(a, b), vals)| {
+                            let offset = pattern.col_ptr[a * cd];
+                            let mut rhs_part = vec![0.0; (b - a) * cd];
+                            schur_columns(&schur_input, (a, b), vals, offset, &mut rhs_part);
+                            rhs_part
+                        })
+                        .collect();
+                    for (&(a, _), part) in ranges.iter().zip(&rhs_parts) {
+                        for (i, v) in part.iter().enumerate() {
+                            rhs[(a * cd + i, 0)] += v;
+                        }
+                    }
+                    if k > 0 {
+                        // The shared rows' own block: S_gg −= Y_g W_gᵀ, rhs_g += Y_g g_p.
+                        for p in 0..np {
+                            let (gp, wg) = (&lins[p].gp, &lins[p].wg);
+                            let yg = &ygs[p * k * pd..(p + 1) * k * pd];
+                            for k1 in 0..k {
+                                let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * gp[d]).sum();
+                                rhs[(nf * cd + k1, 0)] += s;
+                                for k2 in 0..=k1 {
+                                    let s: f64 =
+                                        (0..pd).map(|d| yg[k1 * pd + d] * wg[k2 * pd + d]).sum();
+                                    glob_values[pattern.glob(nf, k1, k2) - cam_end] -= s;
+                                }
+                            }
+                        }
+                    }
+                    if !cfg.damp_points {
+                        base_values.clone_from(&values);
+                    }
+                    assembled = Some(Assembled {
+                        vinv,
+                        rhs,
+                        dcam,
+                        dglob,
+                        implicit: None,
+                    });
+                } else {
+                    // The iterative path: the pieces of the system's product, its
+                    // right-hand side and its block diagonal (the preconditioner).
+                    let dcam: Vec<f64> = (0..nf * cd)
+                        .map(|i| u[(i / cd) * cd * cd + (i % cd) * cd + i % cd].max(dfloor))
+                        .collect();
+                    let dglob: Vec<f64> = (0..k).map(|i| ugg[i * k + i].max(dfloor)).collect();
+                    let mut ucam = vec![0.0; nf * cd * cd];
+                    for f in 0..nf {
+                        let uf = &u[f * cd * cd..(f + 1) * cd * cd];
+                        let out = &mut ucam[f * cd * cd..(f + 1) * cd * cd];
+                        for c1 in 0..cd {
+                            for c2 in 0..=c1 {
+                                out[c1 * cd + c2] = uf[c1 * cd + c2];
+                                out[c2 * cd + c1] = uf[c1 * cd + c2];
+                            }
+                        }
+                        if is_fixed(f) {
+                            for c1 in 0..cd {
+                                out[c1 * cd + c1] += 1e8 * mean_diag_u.max(f64::MIN_POSITIVE);
+                            }
+                        }
+                    }
+                    for (f, kf) in &pins {
+                        for i in 0..cd * cd {
+                            ucam[f * cd * cd + i] += kf[i];
+                        }
+                    }
+                    let mut ugg_full = vec![0.0; k * k];
+                    for k1 in 0..k {
+                        for k2 in 0..=k1 {
+                            ugg_full[k1 * k + k2] = ugg[k1 * k + k2];
+                            ugg_full[k2 * k + k1] = ugg[k1 * k + k2];
+                        }
+                    }
+                    let mut parts = ImplicitParts {
+                        ucam,
+                        ugg: ugg_full,
+                        blocks: None,
+                    };
+                    let (rhs_vec, blocks) = {
+                        let imp = implicit!(&vinv, &parts, &dcam, &dglob);
+                        (imp.rhs(&gc, &gglob, is_fixed), imp.block_diagonal())
+                    };
+                    parts.blocks = Some(blocks);
+                    let rhs = Mat::<f64>::from_fn(ns, 1, |i, _| rhs_vec[i]);
+                    assembled = Some(Assembled {
+                        vinv,
+                        rhs,
+                        dcam,
+                        dglob,
+                        implicit: Some(parts),
                     });
                 }
-                let cam_end = pattern.col_ptr[nf * cd];
-                let (cam_values, glob_values) = values.split_at_mut(cam_end);
-                let ranges = frame_ranges(&pattern, nf, cd, rayon::current_num_threads());
-                let mut value_parts: Vec<&mut [f64]> = Vec::with_capacity(ranges.len());
-                {
-                    let mut rest: &mut [f64] = cam_values;
-                    let mut at = 0;
-                    for &(_, b) in &ranges {
-                        let end = pattern.col_ptr[b * cd];
-                        let (head, tail) = rest.split_at_mut(end - at);
-                        value_parts.push(head);
-                        rest = tail;
-                        at = end;
-                    }
-                }
-                let schur_input = SchurInput {
-                    g,
-                    pattern: &pattern,
-                    dims: (cd, pd, k, m),
-                    lin: &lin,
-                    stride,
-                    lins: &lins,
-                    vinv: &vinv,
-                    ygs: &ygs,
-                };
-                let rhs_parts: Vec<Vec<f64>> = ranges
-                    .par_iter()
-                    .zip(value_parts.into_par_iter())
-                    .map(|(&(a, b), vals)| {
-                        let offset = pattern.col_ptr[a * cd];
-                        let mut rhs_part = vec![0.0; (b - a) * cd];
-                        schur_columns(&schur_input, (a, b), vals, offset, &mut rhs_part);
-                        rhs_part
-                    })
-                    .collect();
-                for (&(a, _), part) in ranges.iter().zip(&rhs_parts) {
-                    for (i, v) in part.iter().enumerate() {
-                        rhs[(a * cd + i, 0)] += v;
-                    }
-                }
-                if k > 0 {
-                    // The shared rows' own block: S_gg −= Y_g W_gᵀ, rhs_g += Y_g g_p.
-                    for p in 0..np {
-                        let (gp, wg) = (&lins[p].gp, &lins[p].wg);
-                        let yg = &ygs[p * k * pd..(p + 1) * k * pd];
-                        for k1 in 0..k {
-                            let s: f64 = (0..pd).map(|d| yg[k1 * pd + d] * gp[d]).sum();
-                            rhs[(nf * cd + k1, 0)] += s;
-                            for k2 in 0..=k1 {
-                                let s: f64 =
-                                    (0..pd).map(|d| yg[k1 * pd + d] * wg[k2 * pd + d]).sum();
-                                glob_values[pattern.glob(nf, k1, k2) - cam_end] -= s;
-                            }
-                        }
-                    }
-                }
-                if !cfg.damp_points {
-                    base_values.clone_from(&values);
-                }
-                assembled = Some(Assembled {
-                    vinv,
-                    rhs,
-                    dcam,
-                    dglob,
-                });
-            } else {
+            } else if pattern.is_some() {
                 values.copy_from_slice(&base_values);
             }
             let Some(Assembled {
@@ -2404,26 +2608,45 @@ pub fn minimize_shared<M: BundleModel>(
                 rhs,
                 dcam,
                 dglob,
+                implicit: parts,
             }) = assembled.as_ref()
             else {
                 unreachable!()
             };
             let mut rhs = rhs.clone();
-            for (i, d) in dcam.iter().enumerate() {
-                values[pattern.pos(i / cd, i / cd, i % cd, i % cd)] += lambda * d;
-            }
-            for (k1, d) in dglob.iter().enumerate() {
-                values[pattern.glob(nf, k1, k1)] += lambda * d;
-            }
-            let mat = SparseColMatRef::new(pattern.symbolic.as_ref(), &values);
-            let solved = factor.factorize(&pattern.llt, mat).then(|| {
-                factor.solve(&pattern.llt, rhs.as_mut());
+            let split = |x: &dyn Fn(usize) -> f64| {
                 let dc: Vec<f64> = (0..nf * cd)
-                    .map(|i| if is_fixed(i / cd) { 0.0 } else { rhs[(i, 0)] })
+                    .map(|i| if is_fixed(i / cd) { 0.0 } else { x(i) })
                     .collect();
-                let dg: Vec<f64> = (0..k).map(|i| rhs[(nf * cd + i, 0)]).collect();
+                let dg: Vec<f64> = (0..k).map(|i| x(nf * cd + i)).collect();
                 (dc, dg)
-            });
+            };
+            let solved = match (pattern.as_ref(), factor.as_mut(), parts.as_ref()) {
+                (Some(pattern), Some(factor), _) => {
+                    for (i, d) in dcam.iter().enumerate() {
+                        values[pattern.pos(i / cd, i / cd, i % cd, i % cd)] += lambda * d;
+                    }
+                    for (k1, d) in dglob.iter().enumerate() {
+                        values[pattern.glob(nf, k1, k1)] += lambda * d;
+                    }
+                    let mat = SparseColMatRef::new(pattern.symbolic.as_ref(), &values);
+                    factor.factorize(&pattern.llt, mat).then(|| {
+                        factor.solve(&pattern.llt, rhs.as_mut());
+                        split(&|i| rhs[(i, 0)])
+                    })
+                }
+                (_, _, Some(parts)) => {
+                    let imp = implicit!(vinv, parts, dcam, dglob);
+                    let b: Vec<f64> = (0..ns).map(|i| rhs[(i, 0)]).collect();
+                    let blocks = parts.blocks.as_ref().unwrap_or_else(|| unreachable!());
+                    imp.solve(blocks, lambda, &b, cfg.cg_tolerance, cfg.cg_max_iterations)
+                        .map(|out| {
+                            cg_iterations += out.iterations;
+                            split(&|i| out.x[i])
+                        })
+                }
+                _ => unreachable!(),
+            };
             let solved =
                 solved.filter(|(dc, dg)| dc.iter().chain(dg.iter()).all(|v| v.is_finite()));
             // The factorization failed or the step is not finite: `S` is not positive
@@ -2501,7 +2724,30 @@ pub fn minimize_shared<M: BundleModel>(
                     is_fixed: &is_fixed,
                 };
                 match acc.correction(&dc, &dg, &dp, |rhs| {
-                    factor.solve(&pattern.llt, rhs.as_mut())
+                    match (pattern.as_ref(), factor.as_mut(), parts.as_ref()) {
+                        (Some(pattern), Some(factor), _) => {
+                            factor.solve(&pattern.llt, rhs.as_mut())
+                        }
+                        (_, _, Some(parts)) => {
+                            let imp = implicit!(vinv, parts, dcam, dglob);
+                            let b: Vec<f64> = (0..ns).map(|i| rhs[(i, 0)]).collect();
+                            let blocks = parts.blocks.as_ref().unwrap_or_else(|| unreachable!());
+                            let out = imp.solve(
+                                blocks,
+                                lambda,
+                                &b,
+                                cfg.cg_tolerance,
+                                cfg.cg_max_iterations,
+                            );
+                            for i in 0..ns {
+                                rhs[(i, 0)] = out.as_ref().map_or(f64::NAN, |o| o.x[i]);
+                            }
+                            if let Some(o) = out {
+                                cg_iterations += o.iterations;
+                            }
+                        }
+                        _ => unreachable!(),
+                    }
                 }) {
                     Some((ac, ag, ap)) => {
                         let n2 = |a: &[f64], b: &[f64], c: &[f64]| {
@@ -2650,8 +2896,14 @@ pub fn minimize_shared<M: BundleModel>(
             seconds: start.elapsed().as_secs_f64(),
         },
         costs,
-        schur_nnz: pattern.nnz(),
+        schur_nnz: pattern.as_ref().map_or(0, Pattern::nnz),
         extensions,
+        linear_solver: if iterative {
+            LinearSolver::Iterative
+        } else {
+            LinearSolver::Direct
+        },
+        cg_iterations,
     })
 }
 
@@ -2714,6 +2966,22 @@ mod tests {
             },
             LmConfig {
                 lambda_decrease: f64::INFINITY,
+                ..LmConfig::default()
+            },
+            LmConfig {
+                cg_tolerance: 0.0,
+                ..LmConfig::default()
+            },
+            LmConfig {
+                cg_tolerance: 1.0,
+                ..LmConfig::default()
+            },
+            LmConfig {
+                cg_tolerance: f64::NAN,
+                ..LmConfig::default()
+            },
+            LmConfig {
+                cg_max_iterations: 0,
                 ..LmConfig::default()
             },
         ] {

@@ -284,6 +284,11 @@ pub struct StageReport {
     pub rms_before_px: f64,
     pub rms_after_px: f64,
     pub seconds: f64,
+    /// How the stage's reduced camera systems were solved (`"direct"` or `"iterative"`;
+    /// `null` for a stage that solves none) and the conjugate-gradient products the
+    /// iterative solver took (0 otherwise).
+    pub linear_solver: Option<bundle::LinearSolver>,
+    pub cg_iterations: usize,
 }
 
 /// Result of [`fit`].
@@ -296,7 +301,8 @@ pub struct ProjectiveFit {
     pub stages: Vec<StageReport>,
     /// Report of the final (projective bundle adjustment) stage.
     pub report: SolverReport,
-    /// Non-zeros of the reduced camera system's lower triangle.
+    /// Non-zeros of the reduced camera system's lower triangle (0: solved by conjugate
+    /// gradients, never formed).
     pub schur_nnz: usize,
 }
 
@@ -526,6 +532,8 @@ pub fn fit(
             rms_before_px: f64::NAN,
             rms_after_px: before,
             seconds,
+            linear_solver: None,
+            cg_iterations: 0,
         });
         (c, x, Start::SturmTriggs)
     } else {
@@ -644,6 +652,8 @@ pub fn fit_observations(
         rms_before_px: f64::NAN,
         rms_after_px: f64::NAN,
         seconds,
+        linear_solver: None,
+        cg_iterations: 0,
     }];
     let (cams, pts) = if windows.projective {
         start
@@ -1054,6 +1064,8 @@ impl Stage {
             rms_before_px: before,
             rms_after_px: rms(r.report.final_cost),
             seconds,
+            linear_solver: Some(r.linear_solver),
+            cg_iterations: r.cg_iterations,
         });
         Ok(r)
     }

@@ -199,7 +199,7 @@ pub(super) fn perspective_markdown(p: &crate::reconstruction::PerspectiveResult)
 pub(super) fn projective_markdown(p: &crate::reconstruction::ProjectiveResult) -> String {
     format!(
         "# Projective reconstruction\n\nstart: {}; final RMS {:.6} px; reduced camera system \
-         {} non-zeros\n\n{}",
+         {} non-zeros (0: solved by conjugate gradients, not formed)\n\n{}",
         crate::output::spelled(&p.start),
         p.rms_px,
         p.schur_nnz,
@@ -210,18 +210,25 @@ pub(super) fn projective_markdown(p: &crate::reconstruction::ProjectiveResult) -
 /// Markdown table of solver stages: status, iterations, RMS before and after, seconds.
 pub(super) fn stages_table(stages: &[crate::projective::StageReport]) -> String {
     let mut s = String::from(
-        "| stage | status | iterations | RMS before (px) | RMS after (px) | s |\n\
-         |---|---|---|---|---|---|\n",
+        "| stage | status | iterations | RMS before (px) | RMS after (px) | s | reduced system |\n\
+         |---|---|---|---|---|---|---|\n",
     );
     for st in stages {
         s.push_str(&format!(
-            "| {} | {} | {} | {:.6} | {:.6} | {:.3} |\n",
+            "| {} | {} | {} | {:.6} | {:.6} | {:.3} | {} |\n",
             st.stage,
             crate::output::spelled(&st.status),
             st.iterations,
             st.rms_before_px,
             st.rms_after_px,
-            st.seconds
+            st.seconds,
+            match st.linear_solver {
+                Some(crate::projective::bundle::LinearSolver::Iterative) => {
+                    format!("conjugate gradients, {} products", st.cg_iterations)
+                }
+                Some(_) => "sparse Cholesky".to_string(),
+                None => "–".to_string(),
+            }
         ));
     }
     s
