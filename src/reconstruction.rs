@@ -332,7 +332,8 @@ pub struct ProjectiveResult {
     pub cameras: Vec<ProjectiveFrame>,
     /// In the input's track order (fitted tracks and outlier tracks, as `points`).
     pub points: Vec<ProjectivePoint>,
-    /// Non-zeros of the reduced camera system (lower triangle) of the bundle adjustment.
+    /// Non-zeros of the reduced camera system (lower triangle) of the bundle adjustment; 0
+    /// when it was solved by conjugate gradients and never formed.
     pub schur_nnz: usize,
     /// The fitted model (fit frames × fit tracks), for library users.
     #[serde(skip)]
@@ -2237,13 +2238,20 @@ fn fit_selection(
         ));
     }
     let mut model = initial_model(&meas, &affine, &upgrade, affine_camera)?;
-    // The refinement's reduced camera matrix is dense, (6F)² at most: skipped (with a
-    // warning) when that exceeds the memory budget rather than aborting on the allocation.
+    // The dense refinement's reduced camera matrix is (6F)²: where that outgrows the
+    // observations (more than `ITERATIVE_FILL` times the sparse engine's 20 numbers per
+    // observation: long sequences whose tracks each span much of them), the sparse engine
+    // refines instead, its memory linear in the observations (`refine::refine_sparse`).
+    // The dense one is skipped (with a warning) when its matrix exceeds the memory budget
+    // rather than aborting on the allocation.
     let refine_dim = 6 * meas.n_frames();
+    let sparse_refine = (refine_dim * refine_dim) as f64
+        > crate::projective::bundle::ITERATIVE_FILL * (20 * meas.n_observed()) as f64;
     const GIB: f64 = (1u64 << 30) as f64;
     let refine_cfg = config.refine.as_ref().filter(|_| {
-        let fits = crate::budget::matrix_bytes(refine_dim, refine_dim)
-            <= crate::budget::DENSE_MATRIX_BYTES;
+        let fits = sparse_refine
+            || crate::budget::matrix_bytes(refine_dim, refine_dim)
+                <= crate::budget::DENSE_MATRIX_BYTES;
         if !fits {
             warnings.push(format!(
                 "the metric refinement was skipped: its dense {refine_dim}×{refine_dim} camera \
@@ -2282,7 +2290,11 @@ fn fit_selection(
     let refinement = match refine_cfg {
         Some(rc) => {
             let r: RefineResult = timer.run("refine", |obs| {
-                refine::refine(&meas, &mut model, affine_camera, rc, obs)
+                if sparse_refine {
+                    refine::refine_sparse(&meas, &mut model, affine_camera, rc, obs)
+                } else {
+                    refine::refine(&meas, &mut model, affine_camera, rc, obs)
+                }
             })?;
             if r.report.status == SolverStatus::Stalled {
                 warnings.push("metric refinement stalled before converging".into());

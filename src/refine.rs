@@ -178,6 +178,139 @@ pub fn refine(
     refine_impl(meas, model, camera, cfg, observer, SchurMode::Auto)
 }
 
+/// [`refine`] by the sparse engine ([`crate::projective::bundle`], the scaled orthographic
+/// residual of [`crate::sparse::ScaledOrthographic`], each camera pivoted about the points
+/// it sees, variable projection): the same objective and parameterization, for tables
+/// whose dense `(cF)²` reduced camera matrix would outgrow the observations.
+///
+/// The engine solves its reduced system by sparse Cholesky or, where that system would be
+/// dense (tracks spanning much of a long sequence), by conjugate gradients on its implicit
+/// form ([`crate::projective::bundle::LinearSolver::Auto`]). Settings:
+/// [`crate::sparse::SparseConfig::default`]'s adjustment with `cfg.max_iterations`. The
+/// gauge is held by springs during the solve, not fixed: call [`fix_gauge`] afterwards, as
+/// for [`refine`]. Iterations are reported as `Event::Iteration { solver:
+/// "sparse-varpro", … }`.
+///
+/// **Complexity.** `O(n_obs)` per product or linearization (see the engine); memory
+/// `O(n_obs + F + N)` on the iterative path, plus the reduced system's non-zeros on the
+/// direct one (bounded by a constant times the observations). Nothing is `O(F·N)` beyond
+/// `meas` itself, or `O(F²)`.
+///
+/// # Errors
+/// As [`refine`]; [`Error::Numerical`] when the engine cannot analyse the system.
+pub fn refine_sparse(
+    meas: &Measurements,
+    model: &mut MetricModel,
+    camera: CameraModel,
+    cfg: &RefineConfig,
+    observer: &mut dyn Observer,
+) -> Result<RefineResult, Error> {
+    validate(meas, model, cfg)?;
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    // The graph in normalized coordinates `(w − c) / σ` (σ = 1 for the orthographic camera,
+    // whose unit scale is in pixels).
+    let mut pt_ptr = Vec::with_capacity(np + 1);
+    let mut cam = Vec::new();
+    let mut w = Vec::new();
+    pt_ptr.push(0);
+    for p in 0..np {
+        for f in 0..nf {
+            if meas.is_visible(f, p) {
+                cam.push(f);
+                w.push([meas.w[(2 * f, p)], meas.w[(2 * f + 1, p)]]);
+            }
+        }
+        pt_ptr.push(cam.len());
+    }
+    let n = w.len().max(1) as f64;
+    let (cx, cy) = w.iter().fold((0.0, 0.0), |(a, b), q| (a + q[0], b + q[1]));
+    let centre = [cx / n, cy / n];
+    let spread = (w
+        .iter()
+        .map(|q| (q[0] - centre[0]).powi(2) + (q[1] - centre[1]).powi(2))
+        .sum::<f64>()
+        / (2.0 * n))
+        .sqrt();
+    let scale = if camera != CameraModel::Orthographic && spread > 0.0 && spread.is_finite() {
+        spread
+    } else {
+        1.0
+    };
+    for q in &mut w {
+        *q = [(q[0] - centre[0]) / scale, (q[1] - centre[1]) / scale];
+    }
+    let prob = crate::sparse::SparseProblem {
+        graph: crate::projective::bundle::Graph {
+            n_cams: nf,
+            n_pts: np,
+            pt_ptr,
+            cam,
+            w,
+        },
+        centre,
+        scale,
+    };
+    // Cameras `[R (9, row-major), s, t (2)]` in normalized units: `s/σ`, `(t − c)/σ`.
+    let mut cams = Vec::with_capacity(12 * nf);
+    for f in 0..nf {
+        let r = model.rotations[f].matrix();
+        for i in 0..3 {
+            for j in 0..3 {
+                cams.push(r[(i, j)]);
+            }
+        }
+        cams.push(model.scales[f] / scale);
+        cams.push((model.translations[f][0] - centre[0]) / scale);
+        cams.push((model.translations[f][1] - centre[1]) / scale);
+    }
+    let mut pts: Vec<f64> = model
+        .points
+        .iter()
+        .flat_map(|x| [x[0], x[1], x[2]])
+        .collect();
+    let n_scalars = 2 * prob.graph.n_obs();
+    let rms_of = |cost: f64| {
+        if n_scalars == 0 {
+            0.0
+        } else {
+            (cost / n_scalars as f64).sqrt()
+        }
+    };
+    let initial_cost = cost(meas, &Structure::new(meas), model);
+    let mut sparse_cfg = crate::sparse::SparseConfig::default();
+    sparse_cfg.lm.max_iterations = cfg.max_iterations.max(1);
+    let lm = prob.adjust(&mut cams, &mut pts, &sparse_cfg, camera, 0, observer)?;
+    let final_cost = lm.report.final_cost * scale * scale;
+    // Keep the start when the engine did not improve it (the cost never increases).
+    if final_cost.is_finite() && final_cost <= initial_cost {
+        for f in 0..nf {
+            let c = &cams[12 * f..12 * f + 12];
+            let m = Matrix3::from_row_slice(&c[..9]);
+            model.rotations[f] = Rotation3::from_matrix_unchecked(m);
+            if camera != CameraModel::Orthographic {
+                model.scales[f] = c[9] * scale;
+            }
+            model.translations[f] =
+                Vector2::new(c[10] * scale + centre[0], c[11] * scale + centre[1]);
+        }
+        for (x, p) in model.points.iter_mut().zip(pts.chunks_exact(3)) {
+            *x = Vector3::new(p[0], p[1], p[2]);
+        }
+    }
+    let current = cost(meas, &Structure::new(meas), model);
+    Ok(RefineResult {
+        report: SolverReport {
+            status: lm.report.status,
+            iterations: lm.report.iterations,
+            initial_cost,
+            final_cost: current,
+            seconds: lm.report.seconds,
+        },
+        rms_before: rms_of(initial_cost),
+        rms_after: rms_of(current),
+    })
+}
+
 /// Re-fixes the gauge of a metric reconstruction without changing any projection.
 ///
 /// 1. Rotates the world so that frame 0's rotation is the identity:
