@@ -1226,6 +1226,62 @@ mod tests {
         }
     }
 
+    /// The sparse engine's refinement reaches the dense one's optimum (the same objective),
+    /// for both camera models, on noisy partial tables; noise-free, it fits exactly; the
+    /// scale ratios it recovers are the truth's.
+    #[test]
+    fn the_sparse_engine_refinement_reaches_the_dense_optimum() {
+        for (seed, cam) in [
+            (21, CameraModel::ScaledOrthographic),
+            (22, CameraModel::Orthographic),
+        ] {
+            let mut rng = StdRng::seed_from_u64(seed);
+            let truth = scene(&mut rng, 20, 120, cam, false);
+            let meas = observe(&mut rng, &truth, 0.5, 0.8);
+            let start = perturb(&mut rng, &truth, 3.0, cam);
+            let (mut a, mut b) = (start.clone(), start.clone());
+            let cfg = RefineConfig::default();
+            let ra = refine(&meas, &mut a, cam, &cfg, &mut NoopObserver).unwrap();
+            let rb = refine_sparse(&meas, &mut b, cam, &cfg, &mut NoopObserver).unwrap();
+            assert!(ra.rms_after > 0.3 && ra.rms_after < 0.6, "{cam:?}: {}", ra.rms_after);
+            assert!(
+                (ra.rms_after - rb.rms_after).abs() <= 1e-6 * ra.rms_after,
+                "{cam:?}: dense {} vs sparse {}",
+                ra.rms_after,
+                rb.rms_after
+            );
+            assert!((rb.rms_before - ra.rms_before).abs() <= 1e-12 * ra.rms_before);
+            let (pa, pb) = (a.predict(), b.predict());
+            for (f, p) in meas.observed_pairs() {
+                for r in [2 * f, 2 * f + 1] {
+                    assert!((pa[(r, p)] - pb[(r, p)]).abs() < 1e-3, "{cam:?} ({f}, {p})");
+                }
+            }
+            if cam == CameraModel::Orthographic {
+                assert!(b.scales.iter().all(|&s| s == 1.0));
+            }
+        }
+        let mut rng = StdRng::seed_from_u64(23);
+        let cam = CameraModel::ScaledOrthographic;
+        let truth = scene(&mut rng, 15, 80, cam, false);
+        let meas = observe(&mut rng, &truth, 0.0, 0.9);
+        let mut model = perturb(&mut rng, &truth, 3.0, cam);
+        let res = refine_sparse(
+            &meas,
+            &mut model,
+            cam,
+            &RefineConfig::default(),
+            &mut NoopObserver,
+        )
+        .unwrap();
+        assert!(res.rms_after < 1e-8, "rms after {}", res.rms_after);
+        for f in 0..truth.n_frames() {
+            let got = model.scales[f] / model.scales[0];
+            let want = truth.scales[f] / truth.scales[0];
+            assert!((got - want).abs() < 1e-6, "frame {f}: {got} vs {want}");
+        }
+    }
+
     #[test]
     fn degenerate_points_stay_finite() {
         let mut rng = StdRng::seed_from_u64(5);
