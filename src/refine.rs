@@ -1243,7 +1243,11 @@ mod tests {
             let cfg = RefineConfig::default();
             let ra = refine(&meas, &mut a, cam, &cfg, &mut NoopObserver).unwrap();
             let rb = refine_sparse(&meas, &mut b, cam, &cfg, &mut NoopObserver).unwrap();
-            assert!(ra.rms_after > 0.3 && ra.rms_after < 0.6, "{cam:?}: {}", ra.rms_after);
+            assert!(
+                ra.rms_after > 0.3 && ra.rms_after < 0.6,
+                "{cam:?}: {}",
+                ra.rms_after
+            );
             assert!(
                 (ra.rms_after - rb.rms_after).abs() <= 1e-6 * ra.rms_after,
                 "{cam:?}: dense {} vs sparse {}",

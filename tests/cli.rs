@@ -1014,7 +1014,11 @@ fn oversized_inputs_are_refused_or_degrade_gracefully() {
         serde_json::from_str(&std::fs::read_to_string(out.join("reconstruction.json")).unwrap())
             .unwrap();
     assert_eq!(json["completion"]["solver"], "als");
-    assert_eq!(json["refinement"]["status"], "converged", "{}", json["refinement"]);
+    assert_eq!(
+        json["refinement"]["status"], "converged",
+        "{}",
+        json["refinement"]
+    );
     assert!(json["refinement"]["skipped"].is_null());
     assert!(
         json["rms_px"].as_f64().unwrap() < 0.01,

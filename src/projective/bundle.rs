@@ -33,6 +33,13 @@
 //! the symbolic analysis is done once per problem, and the numeric factor's
 //! storage and workspace once per adjustment (`Factor`).
 //!
+//! **Long tracks: `S` never formed** ([`implicit`], [`LmConfig::linear_solver`]). Where
+//! every frame shares tracks with most others, `S` and its factor are dense (`(cF)²/2`
+//! numbers each, `O((cF)³)` per factorization). Where they would hold more than
+//! [`ITERATIVE_FILL`] times the linearization's numbers, the step is found instead by
+//! preconditioned conjugate gradients on `S` applied observation by observation, with
+//! memory linear in the observations whatever the camera graph.
+//!
 //! **Variable projection** ([`LmConfig::resolve_points`] with `damp_points = false`): after
 //! every camera step the points are replaced by their optimum for the new cameras (a few
 //! damped Gauss–Newton iterations per point; one is exact for a bilinear model). For
@@ -73,7 +80,8 @@
 //! `O(Σ_p k_p² c² d)` (at most 4 times that where runs of tracks are multiplied as dense
 //! blocks, at the speed of a matrix product); its factorisation depends on the fill of the
 //! camera graph — `O(F b² c³)` for a banded graph of half-bandwidth `b` (a video),
-//! `O((cF)³)` only when every frame shares tracks with every other. Memory:
+//! `O((cF)³)` only when every frame shares tracks with every other — or, on the iterative
+//! path, `O(n_obs m (c + d))` per conjugate-gradient product and no `S`. Memory:
 //! `O(n_obs m (c + d))` for the residuals and the camera and point Jacobians (`m (c + 1 + d)` numbers per observation:
 //! 30 for the projective model, 20 for a 6-parameter affine camera; the blocks
 //! `W = J_cᵀ J_x` are formed where they are used, not stored) plus the non-zeros of `S`
@@ -356,8 +364,8 @@ pub struct LmConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum LinearSolver {
-    /// Iterative when the system's non-zeros would exceed [`ITERATIVE_FILL`] times the
-    /// linearization's numbers, direct otherwise.
+    /// Iterative when the system's or its Cholesky factor's non-zeros would exceed
+    /// [`ITERATIVE_FILL`] times the linearization's numbers, direct otherwise.
     #[default]
     Auto,
     /// Sparse Cholesky of the formed system (fill-reducing ordering).
@@ -584,12 +592,14 @@ impl Factor {
 }
 
 /// Per camera `g`, the cameras `f > g` that share a track with it (sorted): the
-/// off-diagonal blocks of the reduced system's lower triangle. `O(Σ_p k_p²)` time, `O(F)`
-/// beyond the output.
-fn neighbours(g: &Graph) -> Vec<Vec<usize>> {
+/// off-diagonal blocks of the reduced system's lower triangle; `None` as soon as there are
+/// more than `limit` of them. `O(Σ_p k_p²)` time at most (the scan stops at the limit),
+/// `O(F)` beyond the output.
+fn neighbours(g: &Graph, limit: usize) -> Option<Vec<Vec<usize>>> {
     let (cptr, cpts) = g.by_camera();
     let mut mark = vec![usize::MAX; g.n_cams];
     let mut nbrs = vec![Vec::new(); g.n_cams];
+    let mut pairs = 0usize;
     for cam in 0..g.n_cams {
         for &p in &cpts[cptr[cam]..cptr[cam + 1]] {
             for o in g.track(p) {
@@ -600,9 +610,13 @@ fn neighbours(g: &Graph) -> Vec<Vec<usize>> {
                 }
             }
         }
+        pairs += nbrs[cam].len();
+        if pairs > limit {
+            return None;
+        }
         nbrs[cam].sort_unstable();
     }
-    nbrs
+    Some(nbrs)
 }
 
 impl Pattern {
@@ -2082,25 +2096,26 @@ pub fn minimize_shared<M: BundleModel>(
     );
     let (nf, np, nobs) = (g.n_cams, g.n_pts, g.n_obs());
     let stride = m * (cd + 1 + k + pd);
-    let nbrs = neighbours(g);
-    // `Auto`: iterative when the reduced system (estimated from the camera graph before
-    // anything is formed) or its Cholesky factor (from the symbolic analysis) would hold
-    // more than `ITERATIVE_FILL` times the linearization's numbers.
-    let too_big = |nnz: usize| nnz as f64 > ITERATIVE_FILL * (nobs * stride) as f64;
-    let mut iterative = match cfg.linear_solver {
-        LinearSolver::Direct => false,
-        LinearSolver::Iterative => true,
+    // `Auto`: iterative when the reduced system (its camera pairs counted from the graph
+    // before anything is formed, the count stopped at the limit) or its Cholesky factor
+    // (from the symbolic analysis) would hold more than `ITERATIVE_FILL` times the
+    // linearization's numbers.
+    let budget = ITERATIVE_FILL * (nobs * stride) as f64;
+    let too_big = |nnz: usize| nnz as f64 > budget;
+    let nbrs = match cfg.linear_solver {
+        LinearSolver::Direct => neighbours(g, usize::MAX),
+        LinearSolver::Iterative => None,
         LinearSolver::Auto => {
-            let pairs: usize = nbrs.iter().map(Vec::len).sum();
-            too_big(pairs * cd * cd + nf * cd * (cd + 1) / 2 + (nf * cd + k) * k)
+            let fixed = (nf * cd * (cd + 1) / 2 + (nf * cd + k) * k) as f64;
+            let limit = ((budget - fixed) / (cd * cd).max(1) as f64).max(0.0);
+            neighbours(g, limit.min(usize::MAX as f64) as usize)
         }
     };
+    let mut iterative = nbrs.is_none();
     // The direct path's pattern; none for the iterative one.
-    let mut pattern = if iterative {
-        drop(nbrs);
-        None
-    } else {
-        Some(Pattern::new(g, nbrs, cd, k, cfg.dense_schur)?)
+    let mut pattern = match nbrs {
+        Some(nbrs) => Some(Pattern::new(g, nbrs, cd, k, cfg.dense_schur)?),
+        None => None,
     };
     if cfg.linear_solver == LinearSolver::Auto
         && pattern.as_ref().is_some_and(|p| too_big(p.llt.len_val()))
