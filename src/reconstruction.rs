@@ -2240,13 +2240,15 @@ fn fit_selection(
     let mut model = initial_model(&meas, &affine, &upgrade, affine_camera)?;
     // The dense refinement's reduced camera matrix is (6F)²: where that outgrows the
     // observations (more than `ITERATIVE_FILL` times the sparse engine's 20 numbers per
-    // observation: long sequences whose tracks each span much of them), the sparse engine
+    // observation, and more than `ITERATIVE_MIN_NONZEROS`: long sequences whose tracks
+    // each span much of them), the sparse engine
     // refines instead, its memory linear in the observations (`refine::refine_sparse`).
     // The dense one is skipped (with a warning) when its matrix exceeds the memory budget
     // rather than aborting on the allocation.
     let refine_dim = 6 * meas.n_frames();
     let sparse_refine = (refine_dim * refine_dim) as f64
-        > crate::projective::bundle::ITERATIVE_FILL * (20 * meas.n_observed()) as f64;
+        > (crate::projective::bundle::ITERATIVE_FILL * (20 * meas.n_observed()) as f64)
+            .max(crate::projective::bundle::ITERATIVE_MIN_NONZEROS);
     const GIB: f64 = (1u64 << 30) as f64;
     let refine_cfg = config.refine.as_ref().filter(|_| {
         let fits = sparse_refine

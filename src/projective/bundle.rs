@@ -365,7 +365,8 @@ pub struct LmConfig {
 #[serde(rename_all = "kebab-case")]
 pub enum LinearSolver {
     /// Iterative when the system's or its Cholesky factor's non-zeros would exceed
-    /// [`ITERATIVE_FILL`] times the linearization's numbers, direct otherwise.
+    /// [`ITERATIVE_FILL`] times the linearization's numbers and
+    /// [`ITERATIVE_MIN_NONZEROS`], direct otherwise.
     #[default]
     Auto,
     /// Sparse Cholesky of the formed system (fill-reducing ordering).
@@ -385,6 +386,12 @@ pub enum LinearSolver {
 /// tracks) the iterative solver took 3 times as long per start, at 4.5 (a 400-frame
 /// handheld arc) 0.86 times.
 pub const ITERATIVE_FILL: f64 = 3.0;
+
+/// [`LinearSolver::Auto`] stays direct while the reduced system or its factor holds at
+/// most this many numbers (8 MB), whatever the ratio to the linearization: a small system
+/// — a short window, a few tracks per frame — factorizes in milliseconds and its memory
+/// does not matter, and the direct step is exact.
+pub const ITERATIVE_MIN_NONZEROS: f64 = 1e6;
 
 fn default_cg_tolerance() -> f64 {
     1e-6
@@ -2099,8 +2106,8 @@ pub fn minimize_shared<M: BundleModel>(
     // `Auto`: iterative when the reduced system (its camera pairs counted from the graph
     // before anything is formed, the count stopped at the limit) or its Cholesky factor
     // (from the symbolic analysis) would hold more than `ITERATIVE_FILL` times the
-    // linearization's numbers.
-    let budget = ITERATIVE_FILL * (nobs * stride) as f64;
+    // linearization's numbers and more than `ITERATIVE_MIN_NONZEROS`.
+    let budget = (ITERATIVE_FILL * (nobs * stride) as f64).max(ITERATIVE_MIN_NONZEROS);
     let too_big = |nnz: usize| nnz as f64 > budget;
     let nbrs = match cfg.linear_solver {
         LinearSolver::Direct => neighbours(g, usize::MAX),
