@@ -206,47 +206,34 @@ pub fn refine_sparse(
     observer: &mut dyn Observer,
 ) -> Result<RefineResult, Error> {
     validate(meas, model, cfg)?;
-    let (nf, np) = (meas.n_frames(), meas.n_points());
-    // The graph in normalized coordinates `(w − c) / σ` (σ = 1 for the orthographic camera,
-    // whose unit scale is in pixels).
-    let mut pt_ptr = Vec::with_capacity(np + 1);
-    let mut cam = Vec::new();
-    let mut w = Vec::new();
-    pt_ptr.push(0);
-    for p in 0..np {
-        for f in 0..nf {
-            if meas.is_visible(f, p) {
-                cam.push(f);
-                w.push([meas.w[(2 * f, p)], meas.w[(2 * f + 1, p)]]);
-            }
-        }
-        pt_ptr.push(cam.len());
-    }
-    let n = w.len().max(1) as f64;
-    let (cx, cy) = w.iter().fold((0.0, 0.0), |(a, b), q| (a + q[0], b + q[1]));
-    let centre = [cx / n, cy / n];
-    let spread = (w
-        .iter()
-        .map(|q| (q[0] - centre[0]).powi(2) + (q[1] - centre[1]).powi(2))
-        .sum::<f64>()
-        / (2.0 * n))
-        .sqrt();
+    let nf = meas.n_frames();
+    // The graph in normalized coordinates `(w − c) / σ`, `c` the observations' centroid and
+    // `σ` their RMS spread per coordinate (1 for the orthographic camera, whose unit scale
+    // is in pixels).
+    let (mut n, mut cx, mut cy) = (0usize, 0.0, 0.0);
+    meas.for_each_observed(|f, p| {
+        n += 1;
+        cx += meas.w[(2 * f, p)];
+        cy += meas.w[(2 * f + 1, p)];
+    });
+    let centre = [cx / n.max(1) as f64, cy / n.max(1) as f64];
+    let mut ss = 0.0;
+    meas.for_each_observed(|f, p| {
+        ss +=
+            (meas.w[(2 * f, p)] - centre[0]).powi(2) + (meas.w[(2 * f + 1, p)] - centre[1]).powi(2);
+    });
+    let spread = (ss / (2 * n.max(1)) as f64).sqrt();
     let scale = if camera != CameraModel::Orthographic && spread > 0.0 && spread.is_finite() {
         spread
     } else {
         1.0
     };
-    for q in &mut w {
-        *q = [(q[0] - centre[0]) / scale, (q[1] - centre[1]) / scale];
-    }
+    let norm = crate::projective::Normalization {
+        centre,
+        scale: 1.0 / scale,
+    };
     let prob = crate::sparse::SparseProblem {
-        graph: crate::projective::bundle::Graph {
-            n_cams: nf,
-            n_pts: np,
-            pt_ptr,
-            cam,
-            w,
-        },
+        graph: crate::projective::graph(meas, &norm),
         centre,
         scale,
     };
@@ -1162,6 +1149,15 @@ mod tests {
         );
     }
 
+    /// Every frame's scale relative to frame 0's is the truth's, to 1e-6.
+    fn assert_scale_ratios(model: &MetricModel, truth: &MetricModel) {
+        for f in 0..truth.n_frames() {
+            let got = model.scales[f] / model.scales[0];
+            let want = truth.scales[f] / truth.scales[0];
+            assert!((got - want).abs() < 1e-6, "frame {f}: {got} vs {want}");
+        }
+    }
+
     #[test]
     fn scaled_recovers_scale_ratios() {
         let mut rng = StdRng::seed_from_u64(3);
@@ -1178,11 +1174,7 @@ mod tests {
         )
         .unwrap();
         assert!(res.rms_after < 1e-9, "rms after {}", res.rms_after);
-        for f in 0..truth.n_frames() {
-            let got = model.scales[f] / model.scales[0];
-            let want = truth.scales[f] / truth.scales[0];
-            assert!((got - want).abs() < 1e-6, "frame {f}: {got} vs {want}");
-        }
+        assert_scale_ratios(&model, &truth);
     }
 
     #[test]
@@ -1279,11 +1271,7 @@ mod tests {
         )
         .unwrap();
         assert!(res.rms_after < 1e-8, "rms after {}", res.rms_after);
-        for f in 0..truth.n_frames() {
-            let got = model.scales[f] / model.scales[0];
-            let want = truth.scales[f] / truth.scales[0];
-            assert!((got - want).abs() < 1e-6, "frame {f}: {got} vs {want}");
-        }
+        assert_scale_ratios(&model, &truth);
     }
 
     #[test]
