@@ -1158,23 +1158,31 @@ mod tests {
         }
     }
 
+    /// Noise-free, the dense refinement and the sparse engine's fit exactly and recover the
+    /// truth's scale ratios.
     #[test]
     fn scaled_recovers_scale_ratios() {
         let mut rng = StdRng::seed_from_u64(3);
         let cam = CameraModel::ScaledOrthographic;
         let truth = scene(&mut rng, 15, 80, cam, false);
         let meas = observe(&mut rng, &truth, 0.0, 0.9);
-        let mut model = perturb(&mut rng, &truth, 5.0, cam);
-        let res = refine(
-            &meas,
-            &mut model,
-            cam,
-            &RefineConfig::default(),
-            &mut NoopObserver,
-        )
-        .unwrap();
-        assert!(res.rms_after < 1e-9, "rms after {}", res.rms_after);
-        assert_scale_ratios(&model, &truth);
+        let start = perturb(&mut rng, &truth, 5.0, cam);
+        for (sparse, tol) in [(false, 1e-9), (true, 1e-8)] {
+            let mut model = start.clone();
+            let cfg = RefineConfig::default();
+            let res = if sparse {
+                refine_sparse(&meas, &mut model, cam, &cfg, &mut NoopObserver)
+            } else {
+                refine(&meas, &mut model, cam, &cfg, &mut NoopObserver)
+            }
+            .unwrap();
+            assert!(
+                res.rms_after < tol,
+                "sparse {sparse}: rms after {}",
+                res.rms_after
+            );
+            assert_scale_ratios(&model, &truth);
+        }
     }
 
     #[test]
@@ -1219,8 +1227,7 @@ mod tests {
     }
 
     /// The sparse engine's refinement reaches the dense one's optimum (the same objective),
-    /// for both camera models, on noisy partial tables; noise-free, it fits exactly; the
-    /// scale ratios it recovers are the truth's.
+    /// for both camera models, on noisy partial tables (noise-free: `scaled_recovers_scale_ratios`).
     #[test]
     fn the_sparse_engine_refinement_reaches_the_dense_optimum() {
         for (seed, cam) in [
@@ -1257,21 +1264,6 @@ mod tests {
                 assert!(b.scales.iter().all(|&s| s == 1.0));
             }
         }
-        let mut rng = StdRng::seed_from_u64(23);
-        let cam = CameraModel::ScaledOrthographic;
-        let truth = scene(&mut rng, 15, 80, cam, false);
-        let meas = observe(&mut rng, &truth, 0.0, 0.9);
-        let mut model = perturb(&mut rng, &truth, 3.0, cam);
-        let res = refine_sparse(
-            &meas,
-            &mut model,
-            cam,
-            &RefineConfig::default(),
-            &mut NoopObserver,
-        )
-        .unwrap();
-        assert!(res.rms_after < 1e-8, "rms after {}", res.rms_after);
-        assert_scale_ratios(&model, &truth);
     }
 
     #[test]
