@@ -2003,7 +2003,7 @@ struct Assembled {
 struct ImplicitParts {
     ucam: Vec<f64>,
     ugg: Vec<f64>,
-    blocks: Option<implicit::BlockDiagonal>,
+    blocks: implicit::BlockDiagonal,
 }
 
 /// Per-track linearisation: `V_p`, `g_p` and the `W` block of each observation.
@@ -2118,7 +2118,6 @@ pub fn minimize_shared<M: BundleModel>(
             neighbours(g, limit.min(usize::MAX as f64) as usize)
         }
     };
-    let mut iterative = nbrs.is_none();
     // The direct path's pattern; none for the iterative one.
     let mut pattern = match nbrs {
         Some(nbrs) => Some(Pattern::new(g, nbrs, cd, k, cfg.dense_schur)?),
@@ -2127,9 +2126,9 @@ pub fn minimize_shared<M: BundleModel>(
     if cfg.linear_solver == LinearSolver::Auto
         && pattern.as_ref().is_some_and(|p| too_big(p.llt.len_val()))
     {
-        iterative = true;
         pattern = None;
     }
+    let iterative = pattern.is_none();
     let mut factor = match pattern.as_ref() {
         Some(p) => Some(Factor::new(&p.llt)?),
         None => None,
@@ -2383,7 +2382,7 @@ pub fn minimize_shared<M: BundleModel>(
 
         // The iterative path's view of one linearization (see `implicit`).
         macro_rules! implicit {
-            ($vinv:expr, $parts:expr, $dcam:expr, $dglob:expr) => {
+            ($vinv:expr, $ucam:expr, $ugg:expr, $dcam:expr, $dglob:expr) => {
                 implicit::Implicit {
                     g,
                     lin: &lin,
@@ -2394,10 +2393,10 @@ pub fn minimize_shared<M: BundleModel>(
                     cam_ptr: &cam_ptr,
                     cam_obs: &cam_obs,
                     obs_pt: &obs_pt,
-                    ucam: &$parts.ucam,
+                    ucam: $ucam,
                     ugf: &ugf,
                     kc,
-                    ugg: &$parts.ugg,
+                    ugg: $ugg,
                     dcam: $dcam,
                     dglob: $dglob,
                 }
@@ -2436,19 +2435,18 @@ pub fn minimize_shared<M: BundleModel>(
                         inv
                     })
                     .collect();
+                // The diagonal the damping scales (cameras, shared parameters).
+                let dcam: Vec<f64> = (0..nf * cd)
+                    .map(|i| u[(i / cd) * cd * cd + (i % cd) * cd + i % cd].max(dfloor))
+                    .collect();
+                let dglob: Vec<f64> = (0..k).map(|i| ugg[i * k + i].max(dfloor)).collect();
                 if let Some(pattern) = pattern.as_ref() {
                     // Reduced camera system.
                     values.iter_mut().for_each(|x| *x = 0.0);
                     let mut rhs = Mat::<f64>::zeros(ns, 1);
-                    let mut dcam = vec![0.0; nf * cd];
-                    let mut dglob = vec![0.0; k];
                     for k1 in 0..k {
                         for k2 in 0..=k1 {
-                            let v = ugg[k1 * k + k2];
-                            if k1 == k2 {
-                                dglob[k1] = v.max(dfloor);
-                            }
-                            values[pattern.glob(nf, k1, k2)] += v;
+                            values[pattern.glob(nf, k1, k2)] += ugg[k1 * k + k2];
                         }
                         rhs[(nf * cd + k1, 0)] = -gglob[k1];
                     }
@@ -2456,11 +2454,7 @@ pub fn minimize_shared<M: BundleModel>(
                         let uf = &u[f * cd * cd..(f + 1) * cd * cd];
                         for c1 in 0..cd {
                             for c2 in 0..=c1 {
-                                let v = uf[c1 * cd + c2];
-                                if c1 == c2 {
-                                    dcam[f * cd + c1] = v.max(dfloor);
-                                }
-                                values[pattern.pos(f, f, c1, c2)] += v;
+                                values[pattern.pos(f, f, c1, c2)] += uf[c1 * cd + c2];
                             }
                             rhs[(f * cd + c1, 0)] = -gc[f * cd + c1];
                             for k1 in 0..k {
@@ -2571,10 +2565,6 @@ pub fn minimize_shared<M: BundleModel>(
                 } else {
                     // The iterative path: the pieces of the system's product, its
                     // right-hand side and its block diagonal (the preconditioner).
-                    let dcam: Vec<f64> = (0..nf * cd)
-                        .map(|i| u[(i / cd) * cd * cd + (i % cd) * cd + i % cd].max(dfloor))
-                        .collect();
-                    let dglob: Vec<f64> = (0..k).map(|i| ugg[i * k + i].max(dfloor)).collect();
                     let mut ucam = vec![0.0; nf * cd * cd];
                     for f in 0..nf {
                         let uf = &u[f * cd * cd..(f + 1) * cd * cd];
@@ -2603,23 +2593,21 @@ pub fn minimize_shared<M: BundleModel>(
                             ugg_full[k2 * k + k1] = ugg[k1 * k + k2];
                         }
                     }
-                    let mut parts = ImplicitParts {
-                        ucam,
-                        ugg: ugg_full,
-                        blocks: None,
-                    };
                     let (rhs_vec, blocks) = {
-                        let imp = implicit!(&vinv, &parts, &dcam, &dglob);
+                        let imp = implicit!(&vinv, &ucam, &ugg_full, &dcam, &dglob);
                         (imp.rhs(&gc, &gglob, is_fixed), imp.block_diagonal())
                     };
-                    parts.blocks = Some(blocks);
                     let rhs = Mat::<f64>::from_fn(ns, 1, |i, _| rhs_vec[i]);
                     assembled = Some(Assembled {
                         vinv,
                         rhs,
                         dcam,
                         dglob,
-                        implicit: Some(parts),
+                        implicit: Some(ImplicitParts {
+                            ucam,
+                            ugg: ugg_full,
+                            blocks,
+                        }),
                     });
                 }
             } else if pattern.is_some() {
@@ -2658,14 +2646,18 @@ pub fn minimize_shared<M: BundleModel>(
                     })
                 }
                 (_, _, Some(parts)) => {
-                    let imp = implicit!(vinv, parts, dcam, dglob);
-                    let b: Vec<f64> = (0..ns).map(|i| rhs[(i, 0)]).collect();
-                    let blocks = parts.blocks.as_ref().unwrap_or_else(|| unreachable!());
-                    imp.solve(blocks, lambda, &b, cfg.cg_tolerance, cfg.cg_max_iterations)
-                        .map(|out| {
-                            cg_iterations += out.iterations;
-                            split(&|i| out.x[i])
-                        })
+                    let imp = implicit!(vinv, &parts.ucam, &parts.ugg, dcam, dglob);
+                    imp.solve(
+                        &parts.blocks,
+                        lambda,
+                        rhs.col_as_slice(0),
+                        cfg.cg_tolerance,
+                        cfg.cg_max_iterations,
+                    )
+                    .map(|out| {
+                        cg_iterations += out.iterations;
+                        split(&|i| out.x[i])
+                    })
                 }
                 _ => unreachable!(),
             };
@@ -2751,13 +2743,11 @@ pub fn minimize_shared<M: BundleModel>(
                             factor.solve(&pattern.llt, rhs.as_mut())
                         }
                         (_, _, Some(parts)) => {
-                            let imp = implicit!(vinv, parts, dcam, dglob);
-                            let b: Vec<f64> = (0..ns).map(|i| rhs[(i, 0)]).collect();
-                            let blocks = parts.blocks.as_ref().unwrap_or_else(|| unreachable!());
+                            let imp = implicit!(vinv, &parts.ucam, &parts.ugg, dcam, dglob);
                             let out = imp.solve(
-                                blocks,
+                                &parts.blocks,
                                 lambda,
-                                &b,
+                                rhs.col_as_slice(0),
                                 cfg.cg_tolerance,
                                 cfg.cg_max_iterations,
                             );

@@ -52,7 +52,7 @@
 
 use rayon::prelude::*;
 
-use super::{Graph, TrackLin, obs_parts};
+use super::{Graph, TrackLin, obs_parts, w_block};
 use crate::completion::linalg;
 
 /// One linearization's reduced camera system, held as the pieces its product needs.
@@ -237,7 +237,7 @@ impl Implicit<'_> {
     /// The undamped diagonal blocks of `S`: `U_f + K_f − Σ_{p ∋ f} W_fp V_p*⁻¹ W_fpᵀ` per
     /// camera (in parallel) and `U_gg − Σ_p W_gp V_p*⁻¹ W_gpᵀ`.
     pub fn block_diagonal(&self) -> BlockDiagonal {
-        let (cd, pd, k, m) = self.dims;
+        let (cd, pd, k, _) = self.dims;
         let nf = self.g.n_cams;
         let mut cams = self.ucam[..nf * cd * cd].to_vec();
         cams.par_chunks_mut(cd * cd)
@@ -247,17 +247,11 @@ impl Implicit<'_> {
                 let mut y = vec![0.0; cd * pd];
                 for &o in &self.cam_obs[self.cam_ptr[f]..self.cam_ptr[f + 1]] {
                     let p = self.obs_pt[o];
-                    let (jc, _, _, jx) =
-                        obs_parts(&self.lin[o * self.stride..(o + 1) * self.stride], self.dims);
-                    w.iter_mut().for_each(|v| *v = 0.0);
-                    for row in 0..m {
-                        for c in 0..cd {
-                            let a = jc[row * cd + c];
-                            for d in 0..pd {
-                                w[c * pd + d] += a * jx[row * pd + d];
-                            }
-                        }
-                    }
+                    w_block(
+                        &self.lin[o * self.stride..(o + 1) * self.stride],
+                        self.dims,
+                        &mut w,
+                    );
                     let vi = &self.vinv[p];
                     for c in 0..cd {
                         for d2 in 0..pd {
