@@ -209,25 +209,14 @@ pub fn refine_sparse(
     let nf = meas.n_frames();
     // The graph in normalized coordinates `(w − c) / σ`, `c` the observations' centroid and
     // `σ` their RMS spread per coordinate (1 for the orthographic camera, whose unit scale
-    // is in pixels).
-    let (mut n, mut cx, mut cy) = (0usize, 0.0, 0.0);
-    meas.for_each_observed(|f, p| {
-        n += 1;
-        cx += meas.w[(2 * f, p)];
-        cy += meas.w[(2 * f + 1, p)];
-    });
-    let centre = [cx / n.max(1) as f64, cy / n.max(1) as f64];
-    let mut ss = 0.0;
-    meas.for_each_observed(|f, p| {
-        ss +=
-            (meas.w[(2 * f, p)] - centre[0]).powi(2) + (meas.w[(2 * f + 1, p)] - centre[1]).powi(2);
-    });
-    let spread = (ss / (2 * n.max(1)) as f64).sqrt();
-    let scale = if camera != CameraModel::Orthographic && spread > 0.0 && spread.is_finite() {
-        spread
-    } else {
-        1.0
-    };
+    // is in pixels), as the sparse pipeline normalizes its tables.
+    let (centre, scale) = crate::sparse::centre_and_spread(
+        || {
+            meas.observed_pairs()
+                .map(|(f, p)| [meas.w[(2 * f, p)], meas.w[(2 * f + 1, p)]])
+        },
+        camera != CameraModel::Orthographic,
+    );
     let norm = crate::projective::Normalization {
         centre,
         scale: 1.0 / scale,

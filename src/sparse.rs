@@ -362,6 +362,34 @@ impl BundleModel for ScaledOrthographic {
     }
 }
 
+/// The centroid `c` of `points` and their RMS spread per coordinate, `σ = sqrt(Σ ‖w − c‖² /
+/// 2n)` — or 1 when `normalize_scale` is false or the spread is zero or not finite: the
+/// normalization `(w − c) / σ` of the sparse engine's scaled orthographic problems.
+/// `points()` is iterated twice. `O(n)`.
+pub(crate) fn centre_and_spread<I: Iterator<Item = [f64; 2]>>(
+    points: impl Fn() -> I,
+    normalize_scale: bool,
+) -> ([f64; 2], f64) {
+    let (mut n, mut cx, mut cy) = (0usize, 0.0, 0.0);
+    for q in points() {
+        n += 1;
+        cx += q[0];
+        cy += q[1];
+    }
+    let n = n.max(1) as f64;
+    let centre = [cx / n, cy / n];
+    let ss: f64 = points()
+        .map(|q| (q[0] - centre[0]).powi(2) + (q[1] - centre[1]).powi(2))
+        .sum();
+    let scale = (ss / (2.0 * n)).sqrt();
+    let scale = if normalize_scale && scale > 0.0 && scale.is_finite() {
+        scale
+    } else {
+        1.0
+    };
+    (centre, scale)
+}
+
 /// A table as the sparse engine's graph, in normalized coordinates `(w − centre) / scale`.
 pub struct SparseProblem {
     pub graph: Graph,
@@ -374,19 +402,14 @@ impl SparseProblem {
     /// `normalize_scale` (not for the orthographic camera, whose unit scale is in pixels).
     /// `O(n_obs)`.
     pub fn new(table: &TrackTable, normalize_scale: bool) -> Self {
-        let entries = || (0..table.n_frames()).flat_map(|f| table.frame_row(f).entries());
-        let n = table.n_observed().max(1) as f64;
-        let (cx, cy) = entries().fold((0.0, 0.0), |(a, b), e| (a + e.x, b + e.y));
-        let centre = [cx / n, cy / n];
-        let ss: f64 = entries()
-            .map(|e| (e.x - centre[0]).powi(2) + (e.y - centre[1]).powi(2))
-            .sum();
-        let scale = (ss / (2.0 * n)).sqrt();
-        let scale = if normalize_scale && scale > 0.0 && scale.is_finite() {
-            scale
-        } else {
-            1.0
-        };
+        let (centre, scale) = centre_and_spread(
+            || {
+                (0..table.n_frames())
+                    .flat_map(|f| table.frame_row(f).entries())
+                    .map(|e| [e.x, e.y])
+            },
+            normalize_scale,
+        );
         Self::with_normalization(table, centre, scale)
     }
 
