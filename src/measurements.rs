@@ -64,6 +64,51 @@ impl Measurements {
         Measurements::new(w, visible)
     }
 
+    /// A subset of frames and tracks spanning the sequence, on which a decision about the
+    /// whole table (a model test, the choice of a start) costs a bounded amount: at most
+    /// `max_frames` frames evenly spaced over the sequence (so the baseline, which decides
+    /// how much perspective shows, is the whole sequence's), and at most `max_tracks`
+    /// tracks seen in at least 3 of them, taken evenly in track order, plus the tracks
+    /// needed for every subset frame to see `per_frame` (when the table has them).
+    /// `None` when fewer than 7 tracks qualify or the subset would not be smaller than the
+    /// table. `O(F N)`.
+    pub fn spanning_subset(
+        &self,
+        max_frames: usize,
+        max_tracks: usize,
+        per_frame: usize,
+    ) -> Option<(Vec<usize>, Vec<usize>)> {
+        let (nf, np) = (self.n_frames(), self.n_points());
+        let frames = crate::degeneracy::spaced(nf, max_frames);
+        let seen = |p: usize| frames.iter().filter(|&&f| self.is_visible(f, p)).count();
+        let candidates: Vec<usize> = (0..np).filter(|&p| seen(p) >= 3).collect();
+        if candidates.len() < 7 {
+            return None;
+        }
+        let step = candidates.len().div_ceil(max_tracks.max(1)).max(1);
+        let mut chosen = vec![false; np];
+        for &p in candidates.iter().step_by(step) {
+            chosen[p] = true;
+        }
+        for &f in &frames {
+            let mut have = candidates
+                .iter()
+                .filter(|&&p| chosen[p] && self.is_visible(f, p))
+                .count();
+            for &p in &candidates {
+                if have >= per_frame {
+                    break;
+                }
+                if !chosen[p] && self.is_visible(f, p) {
+                    chosen[p] = true;
+                    have += 1;
+                }
+            }
+        }
+        let tracks: Vec<usize> = (0..np).filter(|&p| chosen[p]).collect();
+        (frames.len() < nf || tracks.len() < np).then_some((frames, tracks))
+    }
+
     /// The measurements of the given tracks in every frame ([`Measurements::select`] over
     /// all frames). `O(F·N')` for the N' tracks.
     pub fn select_tracks(&self, tracks: &[usize]) -> Measurements {

@@ -2480,43 +2480,14 @@ fn projective_iteration_flops(meas: &Measurements) -> f64 {
     assembly + (11.0 * nf as f64).powi(3) / 3.0
 }
 
-/// The subset of the automatic choice's projective pre-test on a large table: at most
-/// [`PRETEST_FRAMES`] frames evenly spaced over the sequence (so the baseline, which decides
-/// how much perspective shows, is the whole sequence's), and at most [`PRETEST_TRACKS`]
-/// tracks seen in at least 3 of them, taken evenly in track order, plus the tracks needed
-/// for every subset frame to see [`PRETEST_PER_FRAME`]. `None` when the subset would not
-/// be smaller than the table. The test on the subset ([`part_pretest`]) has less power than
-/// on the whole table. `O(F N)`.
+/// The subset of the automatic choice's projective pre-test on a large table
+/// ([`Measurements::spanning_subset`]): at most [`PRETEST_FRAMES`] frames evenly spaced
+/// over the sequence, at most [`PRETEST_TRACKS`] tracks seen in at least 3 of them, plus
+/// the tracks needed for every subset frame to see [`PRETEST_PER_FRAME`]. `None` when the
+/// subset would not be smaller than the table. The test on the subset ([`part_pretest`])
+/// has less power than on the whole table. `O(F N)`.
 fn pretest_subset(meas: &Measurements) -> Option<(Vec<usize>, Vec<usize>)> {
-    let (nf, np) = (meas.n_frames(), meas.n_points());
-    let frames = crate::degeneracy::spaced(nf, PRETEST_FRAMES);
-    let seen = |p: usize| frames.iter().filter(|&&f| meas.is_visible(f, p)).count();
-    let candidates: Vec<usize> = (0..np).filter(|&p| seen(p) >= 3).collect();
-    if candidates.len() < 7 {
-        return None;
-    }
-    let step = candidates.len().div_ceil(PRETEST_TRACKS).max(1);
-    let mut chosen = vec![false; np];
-    for &p in candidates.iter().step_by(step) {
-        chosen[p] = true;
-    }
-    for &f in &frames {
-        let mut have = candidates
-            .iter()
-            .filter(|&&p| chosen[p] && meas.is_visible(f, p))
-            .count();
-        for &p in &candidates {
-            if have >= PRETEST_PER_FRAME {
-                break;
-            }
-            if !chosen[p] && meas.is_visible(f, p) {
-                chosen[p] = true;
-                have += 1;
-            }
-        }
-    }
-    let tracks: Vec<usize> = (0..np).filter(|&p| chosen[p]).collect();
-    (frames.len() < nf || tracks.len() < np).then_some((frames, tracks))
+    meas.spanning_subset(PRETEST_FRAMES, PRETEST_TRACKS, PRETEST_PER_FRAME)
 }
 
 /// One projective pre-test on a part of the table (a subset of a large dense table, or a

@@ -525,6 +525,12 @@ pub struct StartRecord {
     #[serde(deserialize_with = "nullable")]
     pub rms_px: f64,
     pub chosen: bool,
+    /// Frames and tracks the screening used (absent from files written before they were
+    /// reported: 0).
+    #[serde(default)]
+    pub screen_frames: usize,
+    #[serde(default)]
+    pub screen_tracks: usize,
 }
 
 /// One entry of `perspective.cameras`: `x_cam = rotation · X + translation`.

@@ -477,3 +477,63 @@ fn an_accepted_self_calibration_ends_where_the_full_screening_does() {
         assert!(al.relative_rms < 1e-6, "{case}: {}", al.relative_rms);
     }
 }
+
+/// `PerspectiveConfig::screen_frames`: a long sequence's starts are screened on a subset
+/// of frames spanning it (here 8 of 36, every start screened: strong perspective, early
+/// acceptance off), and the chosen start, adjusted on the whole table, ends at the optimum
+/// the whole table's screening reaches.
+#[test]
+fn starts_screened_on_a_subset_end_where_the_whole_tables_screening_does() {
+    let s = generate(&SynthConfig {
+        camera: CameraModel::Perspective,
+        shape: Shape::House,
+        frames: 36,
+        points: 60,
+        noise: 0.5,
+        missing: 0.3,
+        distance: 1.5,
+        seed: 4,
+        ..SynthConfig::default()
+    })
+    .unwrap();
+    let run = |screen_frames: usize| {
+        let mut c = config(Intrinsics::default());
+        c.perspective.accept_at_noise = false;
+        c.perspective.screen_frames = screen_frames;
+        Reconstruction::from_tracks(&s.table, &c).unwrap()
+    };
+    let (sub, whole) = (run(8), run(0));
+    let (ps, pw) = (
+        sub.perspective.as_ref().unwrap(),
+        whole.perspective.as_ref().unwrap(),
+    );
+    let (nf, np) = (whole.kept_frames.len(), whole.kept_tracks.len());
+    assert_eq!(ps.starts.len(), 7);
+    assert_eq!(pw.starts.len(), 7);
+    for (a, b) in ps.starts.iter().zip(&pw.starts) {
+        assert_eq!(
+            (a.screen_frames, b.screen_frames, b.screen_tracks),
+            (8, nf, np)
+        );
+        assert!(a.screen_tracks >= 7 && a.screen_tracks <= np, "{a:?}");
+    }
+    let chosen = |p: &rank3::reconstruction::PerspectiveResult| {
+        let c = p.starts.iter().find(|r| r.chosen).unwrap();
+        (c.kind, c.mirrored)
+    };
+    assert_eq!(chosen(ps), chosen(pw));
+    assert!(
+        (sub.rms_px - whole.rms_px).abs() <= 1e-7 * whole.rms_px,
+        "RMS {} screened on the subset, {} on the whole table",
+        sub.rms_px,
+        whole.rms_px
+    );
+    let al = align_similarity(&ps.model.points, &pw.model.points, false).unwrap();
+    assert!(al.relative_rms < 1e-5, "{}", al.relative_rms);
+    let e = errors(&sub, &s);
+    assert!(
+        e.structure_rel < 0.02,
+        "structure error {}",
+        e.structure_rel
+    );
+}

@@ -311,8 +311,14 @@ pub fn print_report(rec: &Reconstruction) {
                 )
             })
             .collect();
+        let on = p.starts.first().map_or(String::new(), |s| {
+            format!(
+                " on {} frames × {} tracks",
+                s.screen_frames, s.screen_tracks
+            )
+        });
         info!(
-            "perspective starts (RMS px after screening): {}",
+            "perspective starts (RMS px after screening{on}): {}",
             starts.join(", ")
         );
         for s in &p.stages {

@@ -150,6 +150,23 @@ pub struct PerspectiveConfig {
     /// 21.2 → 8.6 s, the same optimum (docs/results.md). False: every start is screened.
     #[serde(default = "default_accept_at_noise")]
     pub accept_at_noise: bool,
+    /// [`fit`] on a long sequence screens its starts on a subset of the table spanning it
+    /// ([`Measurements::spanning_subset`]: at most this many frames, evenly spaced, and at
+    /// most [`SCREEN_TRACKS`] tracks seen in 3 of them, every subset frame seeing
+    /// [`SCREEN_PER_FRAME`]) when the sequence has more than twice as many frames; the
+    /// chosen start is then adjusted on the whole table. 0: always on the whole table.
+    /// Default 150 (every real data set of docs/results.md is shorter).
+    #[serde(default = "default_screen_frames")]
+    pub screen_frames: usize,
+}
+
+/// Tracks of [`fit`]'s screening subset ([`PerspectiveConfig::screen_frames`]).
+pub const SCREEN_TRACKS: usize = 400;
+/// Tracks each frame of [`fit`]'s screening subset sees at least (when the table has them).
+pub const SCREEN_PER_FRAME: usize = 12;
+
+fn default_screen_frames() -> usize {
+    150
 }
 
 fn default_accept_at_noise() -> bool {
@@ -189,6 +206,7 @@ impl Default for PerspectiveConfig {
             long_geodesic_acceleration: default_long_geodesic_acceleration(),
             focal_sample_windows: default_focal_sample_windows(),
             accept_at_noise: default_accept_at_noise(),
+            screen_frames: default_screen_frames(),
         }
     }
 }
@@ -264,6 +282,19 @@ pub struct PerspectiveModel {
 }
 
 impl PerspectiveModel {
+    /// The model of the given frames and tracks (indices, in the order given).
+    pub fn select(&self, frames: &[usize], tracks: &[usize]) -> PerspectiveModel {
+        PerspectiveModel {
+            focal_px: frames.iter().map(|&f| self.focal_px[f]).collect(),
+            principal_point: self.principal_point,
+            k1: self.k1,
+            aspect: self.aspect,
+            rotations: frames.iter().map(|&f| self.rotations[f]).collect(),
+            translations: frames.iter().map(|&f| self.translations[f]).collect(),
+            points: tracks.iter().map(|&p| self.points[p]).collect(),
+        }
+    }
+
     /// `π_f(X)` for any point.
     pub fn project_point(&self, f: usize, x: &Vector3<f64>) -> [f64; 2] {
         let xc = self.rotations[f] * x + self.translations[f];
@@ -416,10 +447,15 @@ pub struct StartReport {
     pub focal_px: f64,
     /// Whether the affine model was mirrored (depth reversal) for this start.
     pub mirrored: bool,
-    /// Reprojection RMS after the screening iterations, pixels (robust cost as RMS).
+    /// Reprojection RMS after the screening iterations, pixels (robust cost as RMS), over
+    /// the observations of the frames and tracks screened.
     pub rms_px: f64,
     /// Whether it was kept.
     pub chosen: bool,
+    /// Frames and tracks the screening used: the whole table's, or on a long sequence a
+    /// subset spanning it ([`PerspectiveConfig::screen_frames`]).
+    pub screen_frames: usize,
+    pub screen_tracks: usize,
 }
 
 /// Upgrades the projective model of `meas` to a metric perspective one and refines it.
@@ -450,9 +486,15 @@ pub struct StartReport {
 /// ([`Error::Degenerate`]), a numerical failure of a solver's setup. How the adjustment
 /// ended is in the report.
 ///
+/// **Long sequences** ([`PerspectiveConfig::screen_frames`]): the starts are screened on a
+/// subset of frames and tracks spanning the sequence (the early acceptance judged there
+/// against the projective model restricted to it), and the chosen start is adjusted on the
+/// whole table from its unscreened self.
+///
 /// Cost: the self-calibration `O(F + N)`, then `O(n_obs)` per adjustment iteration:
 /// [`PerspectiveConfig::screen_iterations`] per screened start (1, or 1 + 2 × the focal
-/// grid's length), then the final adjustment's.
+/// grid's length) on the screened observations (bounded on a long sequence), then the
+/// final adjustment's.
 pub fn fit(
     meas: &Measurements,
     proj: &ProjectiveModel,
@@ -531,29 +573,60 @@ pub(crate) fn fit_lazy<'a>(
     };
     // One graph for every start and the final adjustment (the same assumed frame).
     let g = normalised_graph(meas, &assumed);
-    let mut best: Option<(usize, f64, PerspectiveModel)> = None;
+    // A long sequence screens its starts on a subset spanning it (same assumed frame).
+    let subset = screening_subset(meas, cfg.screen_frames).map(|(frames, tracks)| {
+        let m = meas.select(&frames, &tracks);
+        let g = normalised_graph(&m, &assumed);
+        Subset {
+            frames,
+            tracks,
+            meas: m,
+            graph: g,
+        }
+    });
+    let (screen_frames, screen_tracks, screen_obs) = match &subset {
+        Some(sub) => (sub.frames.len(), sub.tracks.len(), sub.meas.n_observed()),
+        None => (nf, np, obs.len()),
+    };
+    starts
+        .iter_mut()
+        .for_each(|(r, _)| (r.screen_frames, r.screen_tracks) = (screen_frames, screen_tracks));
+    // The best start: its index, screened cost, and screened model when that is the
+    // whole table's (a subset's is not a start for the whole table: the start itself is).
+    let mut best: Option<(usize, f64, Option<PerspectiveModel>)> = None;
     // Screens `starts[from..]`; returns the plain RMS of the best of them.
     let screen = |starts: &mut [(StartReport, PerspectiveModel)],
                   from: usize,
-                  best: &mut Option<(usize, f64, PerspectiveModel)>| {
+                  best: &mut Option<(usize, f64, Option<PerspectiveModel>)>| {
         let mut plain = f64::INFINITY;
         for (i, (report, start)) in starts.iter_mut().enumerate().skip(from) {
-            let screened = adjust_graph(
-                &g,
-                start.clone(),
-                &screen_cfg,
-                &assumed,
-                false,
-                run,
-                &mut crate::NoopObserver,
-            );
+            let screened = match &subset {
+                Some(sub) => adjust_graph(
+                    &sub.graph,
+                    start.select(&sub.frames, &sub.tracks),
+                    &screen_cfg,
+                    &assumed,
+                    false,
+                    run,
+                    &mut crate::NoopObserver,
+                ),
+                None => adjust_graph(
+                    &g,
+                    start.clone(),
+                    &screen_cfg,
+                    &assumed,
+                    false,
+                    run,
+                    &mut crate::NoopObserver,
+                ),
+            };
             let Ok(sc) = screened else { continue };
             let cost = sc.report.final_cost;
-            let n_res = (2 * obs.len()).max(1) as f64;
+            let n_res = (2 * screen_obs).max(1) as f64;
             report.rms_px = (cost / n_res).sqrt() * s;
             if cost.is_finite() && best.as_ref().is_none_or(|b| cost < b.1) {
                 plain = sc.rms_px;
-                *best = Some((i, cost, sc.model));
+                *best = Some((i, cost, subset.is_none().then_some(sc.model)));
             }
         }
         plain
@@ -561,7 +634,16 @@ pub(crate) fn fit_lazy<'a>(
     let selfcal_rms = screen(&mut starts, 0, &mut best);
     let accepted = cfg.accept_at_noise
         && best.is_some()
-        && within_noise_of_projective(meas, proj, selfcal_rms, cfg, &assumed);
+        && match &subset {
+            Some(sub) => within_noise_of_projective(
+                &sub.meas,
+                &proj.select(&sub.frames, &sub.tracks),
+                selfcal_rms,
+                cfg,
+                &assumed,
+            ),
+            None => within_noise_of_projective(meas, proj, selfcal_rms, cfg, &assumed),
+        };
     if !accepted && let Some(a) = affine() {
         let a: &MetricModel = &a;
         if a.rotations.len() == nf && a.points.len() == np {
@@ -583,6 +665,8 @@ pub(crate) fn fit_lazy<'a>(
                             mirrored,
                             rms_px: f64::NAN,
                             chosen: false,
+                            screen_frames,
+                            screen_tracks,
                         },
                         lift_affine(a, f, mirrored, assumed.principal_point),
                     ));
@@ -596,18 +680,43 @@ pub(crate) fn fit_lazy<'a>(
             Error::Degenerate("perspective::fit: no start for the metric adjustment".into())
         }));
     }
-    let Some((chosen, _, start)) = best else {
+    let Some((chosen, _, screened)) = best else {
         return Err(Error::Numerical {
             stage: "metric bundle adjustment",
             message: "no start could be adjusted".into(),
         });
     };
     starts[chosen].0.chosen = true;
+    let start = screened.unwrap_or_else(|| starts[chosen].1.clone());
     let estimate_pp = cfg.estimates_principal_point(&assumed);
     let mut out = adjust_graph(&g, start, cfg, &assumed, estimate_pp, run, observer)?;
     out.selfcal = selfcal_report;
     out.starts = starts.into_iter().map(|(r, _)| r).collect();
     Ok(out)
+}
+
+/// [`fit`]'s screening subset of a long sequence: frames, tracks, their measurements and
+/// graph.
+struct Subset {
+    frames: Vec<usize>,
+    tracks: Vec<usize>,
+    meas: Measurements,
+    graph: projective::bundle::Graph,
+}
+
+/// The frames and tracks [`fit`] screens its starts on: `None` (the whole table) unless the
+/// sequence has more than `2 · screen_frames` frames (`screen_frames` > 0) and
+/// [`Measurements::spanning_subset`] finds one whose every frame sees at least 6 of its
+/// tracks (a perspective camera's minimum).
+fn screening_subset(meas: &Measurements, screen_frames: usize) -> Option<(Vec<usize>, Vec<usize>)> {
+    if screen_frames == 0 || meas.n_frames() <= 2 * screen_frames {
+        return None;
+    }
+    let (frames, tracks) = meas.spanning_subset(screen_frames, SCREEN_TRACKS, SCREEN_PER_FRAME)?;
+    frames
+        .iter()
+        .all(|&f| tracks.iter().filter(|&&p| meas.is_visible(f, p)).count() >= 6)
+        .then_some((frames, tracks))
 }
 
 /// [`fit`]'s early acceptance: whether a metric model at plain RMS `metric_rms` (pixels)
@@ -693,6 +802,9 @@ fn selfcal_start(
         mirrored: false,
         rms_px: f64::NAN,
         chosen: false,
+        // Set by `fit` once it knows what it screens on.
+        screen_frames: 0,
+        screen_tracks: 0,
     };
     let model = PerspectiveModel {
         focal_px,

@@ -181,6 +181,14 @@ pub struct ProjectiveModel {
 }
 
 impl ProjectiveModel {
+    /// The model of the given frames and tracks (indices, in the order given).
+    pub fn select(&self, frames: &[usize], tracks: &[usize]) -> ProjectiveModel {
+        ProjectiveModel {
+            cameras: frames.iter().map(|&f| self.cameras[f]).collect(),
+            points: tracks.iter().map(|&p| self.points[p]).collect(),
+        }
+    }
+
     /// `π(P_f X_p)`.
     #[inline]
     pub fn project(&self, f: usize, p: usize) -> [f64; 2] {

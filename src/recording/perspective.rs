@@ -176,8 +176,14 @@ pub(super) fn perspective_markdown(p: &crate::reconstruction::PerspectiveResult)
             sc.sdp_status.as_deref().unwrap_or("not needed")
         ));
     }
+    if let Some(st) = p.starts.first() {
+        s.push_str(&format!(
+            "\n## Starts (screened on {} frames × {} tracks)\n\n",
+            st.screen_frames, st.screen_tracks
+        ));
+    }
     s.push_str(
-        "\n## Starts (screened)\n\n| start | focal (px) | mirrored | RMS (px) | kept |\n\
+        "| start | focal (px) | mirrored | RMS (px) | kept |\n\
          |---|---|---|---|---|\n",
     );
     for st in &p.starts {
