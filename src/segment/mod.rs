@@ -719,15 +719,20 @@ pub fn segment<R: Rng + ?Sized>(
     if let Some(w) = windows::plan(&ts, cfg) {
         return windows::segment_windows(meas, &ts, &w, cfg, rng, t0);
     }
-    segment_tracks(&ts, cfg, rng, t0)
+    segment_tracks(&ts, cfg, rng, t0, None)
 }
 
 /// [`segment`] on the tracks `ts` holds (`cfg` already validated; `t0` starts the clock).
+///
+/// `seeds` (a mask over `ts`'s tracks): the hypotheses are seeded from these tracks only,
+/// and their number is `hypotheses` scaled by the seeds' share of the eligible tracks (at
+/// least [`MIN_SEEDED_HYPOTHESES`]): as many seeded on each of them as without the mask.
 fn segment_tracks<R: Rng + ?Sized>(
     ts: &TrackSubspace,
     cfg: &SegmentConfig,
     rng: &mut R,
     t0: Instant,
+    seeds: Option<&[bool]>,
 ) -> Result<Segmentation> {
     let n = ts.n_tracks();
     let min_overlap = ts.min_overlap();
@@ -762,8 +767,22 @@ fn segment_tracks<R: Rng + ?Sized>(
 
     // 1. Hypotheses from local neighbourhoods, each with its own σ².
     let nbrs = neighbours(ts, &eligible, cfg.neighbours);
-    let samples: Vec<Vec<usize>> = (0..cfg.hypotheses)
-        .filter_map(|_| local_sample(ts, &eligible, &nbrs, rng))
+    let (seed_pool, n_hypotheses) = match seeds {
+        Some(mask) => {
+            let pool: Vec<usize> = eligible.iter().copied().filter(|&p| mask[p]).collect();
+            let h = (cfg.hypotheses as f64 * pool.len() as f64 / eligible.len() as f64).round()
+                as usize;
+            let h = h.max(MIN_SEEDED_HYPOTHESES).min(cfg.hypotheses);
+            if pool.is_empty() {
+                (eligible.clone(), cfg.hypotheses)
+            } else {
+                (pool, h)
+            }
+        }
+        None => (eligible.clone(), cfg.hypotheses),
+    };
+    let samples: Vec<Vec<usize>> = (0..n_hypotheses)
+        .filter_map(|_| local_sample(ts, &seed_pool, &nbrs, rng))
         .collect();
     let sweeps = cfg.refit_sweeps;
     let grow = cfg.grow_steps;
@@ -1817,6 +1836,9 @@ fn neighbours(ts: &TrackSubspace, eligible: &[usize], k: usize) -> Vec<Vec<usize
 /// A seed track and a random half (at least 3) of its neighbours; the first 4 tracks share
 /// `min_overlap` frames (they make the minimal fit). `None` when the seed has too few
 /// compatible neighbours.
+/// Fewest hypotheses of a seeded search ([`segment_tracks`]'s `seeds`).
+const MIN_SEEDED_HYPOTHESES: usize = 50;
+
 fn local_sample<R: Rng + ?Sized>(
     ts: &TrackSubspace,
     eligible: &[usize],
@@ -1970,6 +1992,22 @@ pub fn other_objects<R: Rng + ?Sized>(
     cfg: &SegmentConfig,
     rng: &mut R,
 ) -> Result<Vec<OtherObject>> {
+    other_objects_seeded(meas, main, noise_sigma_px, candidates, None, cfg, rng)
+}
+
+/// [`other_objects`] with its hypotheses seeded from `seeds` only (tracks of `meas`, among
+/// `candidates`), as many on each seed as without it: a search of many candidates for an
+/// object among a few of them costs in proportion to the few
+/// ([`crate::reconstruction`]'s search of the tracks kept by the robust pass's floor).
+pub fn other_objects_seeded<R: Rng + ?Sized>(
+    meas: &Measurements,
+    main: &AffineSubspace,
+    noise_sigma_px: f64,
+    candidates: &[usize],
+    seeds: Option<&[usize]>,
+    cfg: &SegmentConfig,
+    rng: &mut R,
+) -> Result<Vec<OtherObject>> {
     cfg.validate()?;
     if candidates.len() < 2 * cfg.min_group_tracks {
         return Ok(Vec::new());
@@ -1979,6 +2017,11 @@ pub fn other_objects<R: Rng + ?Sized>(
     // One estimator over the candidates serves the segmentation and both fits below (a
     // track's fit to `main` depends only on the track and the frames).
     let ts = TrackSubspace::new(&sub, &cfg.subspace);
+    let seed_mask: Option<Vec<bool>> = seeds.map(|seeds| {
+        let mut is_seed = vec![false; n_all];
+        seeds.iter().for_each(|&p| is_seed[p] = true);
+        candidates.iter().map(|&p| is_seed[p]).collect()
+    });
     // Without the spectral partition: the candidates are mostly junk (random walks,
     // sliding tracks), whose groups the energy's count includes, and repartitioning them
     // spectrally split the object (Hopkins `cars1`: three groups seen instead of two).
@@ -1993,7 +2036,7 @@ pub fn other_objects<R: Rng + ?Sized>(
         short_track_frames: usize::MAX,
         ..cfg.clone()
     };
-    let seg = match segment_tracks(&ts, cfg, rng, Instant::now()) {
+    let seg = match segment_tracks(&ts, cfg, rng, Instant::now(), seed_mask.as_deref()) {
         Ok(s) => s,
         Err(Error::TooFew { .. }) | Err(Error::Degenerate(_)) => return Ok(Vec::new()),
         Err(e) => return Err(e),

@@ -657,3 +657,30 @@ fn a_long_sequence_of_short_tracks_is_segmented_by_windows() {
         }
     }
 }
+
+/// [`other_objects_seeded`]: an object among a few seed tracks of a search over the whole
+/// table is found with the hypotheses seeded there only (50 of them here, for 40 seeds of
+/// 280 candidates), its tracks and none of the scene's.
+#[test]
+fn a_seeded_search_finds_the_object_among_its_seeds() {
+    let sizes = [(250, Motion::General), (30, Motion::General)];
+    let (meas, truth) = scene(30, &sizes, 0, 0.5, 0.0, 5);
+    let cfg = SegmentConfig::default();
+    let ts = TrackSubspace::new(&meas, &cfg.subspace);
+    let scene_tracks: Vec<usize> = (0..250).collect();
+    let m0 = ts.fit(&scene_tracks[..4]).expect("a minimal fit");
+    let main = ts
+        .refit_with(&m0, &scene_tracks, cfg.refit_sweeps)
+        .expect("the scene's subspace");
+    let candidates: Vec<usize> = (0..meas.n_points()).collect();
+    // The object's 30 tracks and 10 of the scene's.
+    let seeds: Vec<usize> = (240..280).collect();
+    let mut rng = StdRng::seed_from_u64(3);
+    let groups =
+        other_objects_seeded(&meas, &main, 0.5, &candidates, Some(&seeds), &cfg, &mut rng).unwrap();
+    assert_eq!(groups.len(), 1, "{} groups", groups.len());
+    let g = &groups[0].tracks;
+    let on_object = g.iter().filter(|&&p| truth[p] == 1).count();
+    assert!(on_object >= 29, "{on_object} of the object's 30 tracks");
+    assert_eq!(g.len(), on_object, "scene tracks in the group: {g:?}");
+}

@@ -135,7 +135,7 @@ pub(super) fn segment_windows<R: Rng + ?Sized>(
             .collect();
         let sub = meas.select(&frames, &tracks);
         let wts = TrackSubspace::new(&sub, &cfg.subspace);
-        let seg = match segment_tracks(&wts, cfg, rng, Instant::now()) {
+        let seg = match segment_tracks(&wts, cfg, rng, Instant::now(), None) {
             Ok(s) => s,
             Err(Error::TooFew { .. }) | Err(Error::Degenerate(_)) => {
                 labels_in.push(Vec::new());
