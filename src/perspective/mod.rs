@@ -584,23 +584,23 @@ pub(crate) fn fit_lazy<'a>(
             graph: g,
         }
     });
-    let (screen_frames, screen_tracks, screen_obs) = match &subset {
-        Some(sub) => (sub.frames.len(), sub.tracks.len(), sub.meas.n_observed()),
-        None => (nf, np, obs.len()),
-    };
-    starts
-        .iter_mut()
-        .for_each(|(r, _)| (r.screen_frames, r.screen_tracks) = (screen_frames, screen_tracks));
     // The best start: its index, screened cost, and screened model when that is the
     // whole table's (a subset's is not a start for the whole table: the start itself is).
     let mut best: Option<(usize, f64, Option<PerspectiveModel>)> = None;
-    // Screens `starts[from..]`; returns the plain RMS of the best of them.
+    // Screens `starts[from..]` (on `subset` when given); returns the plain RMS of the best
+    // of them.
     let screen = |starts: &mut [(StartReport, PerspectiveModel)],
                   from: usize,
-                  best: &mut Option<(usize, f64, Option<PerspectiveModel>)>| {
+                  best: &mut Option<(usize, f64, Option<PerspectiveModel>)>,
+                  subset: Option<&Subset>| {
         let mut plain = f64::INFINITY;
+        let (screen_frames, screen_tracks, screen_obs) = match subset {
+            Some(sub) => (sub.frames.len(), sub.tracks.len(), sub.meas.n_observed()),
+            None => (nf, np, obs.len()),
+        };
         for (i, (report, start)) in starts.iter_mut().enumerate().skip(from) {
-            let screened = match &subset {
+            (report.screen_frames, report.screen_tracks) = (screen_frames, screen_tracks);
+            let screened = match subset {
                 Some(sub) => adjust_graph(
                     &sub.graph,
                     start.select(&sub.frames, &sub.tracks),
@@ -631,7 +631,7 @@ pub(crate) fn fit_lazy<'a>(
         }
         plain
     };
-    let selfcal_rms = screen(&mut starts, 0, &mut best);
+    let selfcal_rms = screen(&mut starts, 0, &mut best, subset.as_ref());
     let accepted = cfg.accept_at_noise
         && best.is_some()
         && match &subset {
@@ -665,15 +665,19 @@ pub(crate) fn fit_lazy<'a>(
                             mirrored,
                             rms_px: f64::NAN,
                             chosen: false,
-                            screen_frames,
-                            screen_tracks,
+                            screen_frames: 0,
+                            screen_tracks: 0,
                         },
                         lift_affine(a, f, mirrored, assumed.principal_point),
                     ));
                 }
             }
-            screen(&mut starts, from, &mut best);
+            screen(&mut starts, from, &mut best, subset.as_ref());
         }
+    }
+    // No start could be adjusted on the subset: the whole table screens them.
+    if best.is_none() && subset.is_some() {
+        screen(&mut starts, 0, &mut best, None);
     }
     if starts.is_empty() {
         return Err(selfcal_error.unwrap_or_else(|| {
