@@ -1833,12 +1833,12 @@ fn neighbours(ts: &TrackSubspace, eligible: &[usize], k: usize) -> Vec<Vec<usize
     out
 }
 
-/// A seed track and a random half (at least 3) of its neighbours; the first 4 tracks share
-/// `min_overlap` frames (they make the minimal fit). `None` when the seed has too few
-/// compatible neighbours.
 /// Fewest hypotheses of a seeded search ([`segment_tracks`]'s `seeds`).
 const MIN_SEEDED_HYPOTHESES: usize = 50;
 
+/// A seed track and a random half (at least 3) of its neighbours; the first 4 tracks share
+/// `min_overlap` frames (they make the minimal fit). `None` when the seed has too few
+/// compatible neighbours.
 fn local_sample<R: Rng + ?Sized>(
     ts: &TrackSubspace,
     eligible: &[usize],
@@ -1996,9 +1996,12 @@ pub fn other_objects<R: Rng + ?Sized>(
 }
 
 /// [`other_objects`] with its hypotheses seeded from `seeds` only (tracks of `meas`, among
-/// `candidates`), as many on each seed as without it: a search of many candidates for an
-/// object among a few of them costs in proportion to the few
-/// ([`crate::reconstruction`]'s search of the tracks kept by the robust pass's floor).
+/// `candidates`; others are ignored), as many on each seed as without it —
+/// `hypotheses × seeds / candidates`, at least 50 — so that a search of many candidates for
+/// an object among a few of them costs in proportion to the few: the segmentation's
+/// hypothesis term `O(H (1 + grow_steps) n_obs)` with `H` scaled down (the robust pass's
+/// search of the tracks it kept only by its floor, `crate::reconstruction`). `None`: every
+/// candidate seeds, as [`other_objects`].
 pub fn other_objects_seeded<R: Rng + ?Sized>(
     meas: &Measurements,
     main: &AffineSubspace,
@@ -2019,7 +2022,10 @@ pub fn other_objects_seeded<R: Rng + ?Sized>(
     let ts = TrackSubspace::new(&sub, &cfg.subspace);
     let seed_mask: Option<Vec<bool>> = seeds.map(|seeds| {
         let mut is_seed = vec![false; n_all];
-        seeds.iter().for_each(|&p| is_seed[p] = true);
+        seeds
+            .iter()
+            .filter(|&&p| p < n_all)
+            .for_each(|&p| is_seed[p] = true);
         candidates.iter().map(|&p| is_seed[p]).collect()
     });
     // Without the spectral partition: the candidates are mostly junk (random walks,
