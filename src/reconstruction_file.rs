@@ -384,6 +384,9 @@ pub struct ProjectiveJudgementRecord {
     /// Absent from files written before 2026-11-29 (read as 0).
     #[serde(default)]
     pub objects_held_out: usize,
+    /// Absent from files written before 2026-11-30 (read as 0).
+    #[serde(default)]
+    pub readmissions_not_refitted: usize,
 }
 
 /// `refinement`.

@@ -242,6 +242,17 @@ pub fn print_report(rec: &Reconstruction) {
                 String::new()
             }
         );
+        if j.readmissions_not_refitted > 0 {
+            info!(
+                "projective verdict: {} flagged entr{} it would readmit stay flagged (within                  the fit's noise; not refitted)",
+                j.readmissions_not_refitted,
+                if j.readmissions_not_refitted == 1 {
+                    "y"
+                } else {
+                    "ies"
+                }
+            );
+        }
     }
     if let Some(p) = &rec.projective {
         let solver = if p.schur_nnz == 0 {
