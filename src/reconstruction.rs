@@ -247,7 +247,8 @@ pub struct ProjectiveJudgement {
     /// Entry noise σ_e and entry threshold under the projective model, pixels.
     pub noise_sigma_px: f64,
     pub entry_threshold_px: f64,
-    /// How many times the fit was run again with a new selection (at most 3).
+    /// How many times the fit was run again with a new selection (at most 5,
+    /// `PROJECTIVE_VERDICT_ROUNDS`).
     pub refits: usize,
     /// Other rigid objects found by the affine pass that stay rejected whatever the verdict:
     /// their own rigid motion explains their tracks better than the projective cameras
