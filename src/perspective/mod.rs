@@ -711,16 +711,40 @@ struct Subset {
 /// The frames and tracks [`fit`] screens its starts on: `None` (the whole table) unless the
 /// sequence has more than `2 · screen_frames` frames (`screen_frames` > 0) and
 /// [`Measurements::spanning_subset`] finds one whose every frame sees at least 6 of its
-/// tracks (a perspective camera's minimum).
+/// tracks (a perspective camera's minimum) and whose frames are linked by the tracks they
+/// share (one reconstruction, not several with gauges of their own: consecutive subset
+/// frames sharing no track, as short tracks sampled sparsely would leave them, fall back to
+/// the whole table). `O(F' N')` for the subset's frames and tracks.
 fn screening_subset(meas: &Measurements, screen_frames: usize) -> Option<(Vec<usize>, Vec<usize>)> {
     if screen_frames == 0 || meas.n_frames() <= 2 * screen_frames {
         return None;
     }
     let (frames, tracks) = meas.spanning_subset(screen_frames, SCREEN_TRACKS, SCREEN_PER_FRAME)?;
-    frames
-        .iter()
-        .all(|&f| tracks.iter().filter(|&&p| meas.is_visible(f, p)).count() >= 6)
-        .then_some((frames, tracks))
+    // Connected: a frame reached from the first through a shared track reaches every
+    // frame that sees that track.
+    let mut reached = vec![false; frames.len()];
+    let mut track_seen = vec![false; tracks.len()];
+    let mut stack = vec![0usize];
+    reached[0] = true;
+    while let Some(i) = stack.pop() {
+        for (j, &p) in tracks.iter().enumerate() {
+            if track_seen[j] || !meas.is_visible(frames[i], p) {
+                continue;
+            }
+            track_seen[j] = true;
+            for (k, &f) in frames.iter().enumerate() {
+                if !reached[k] && meas.is_visible(f, p) {
+                    reached[k] = true;
+                    stack.push(k);
+                }
+            }
+        }
+    }
+    (reached.iter().all(|&r| r)
+        && frames
+            .iter()
+            .all(|&f| tracks.iter().filter(|&&p| meas.is_visible(f, p)).count() >= 6))
+    .then_some((frames, tracks))
 }
 
 /// [`fit`]'s early acceptance: whether a metric model at plain RMS `metric_rms` (pixels)
@@ -1245,6 +1269,34 @@ mod tests {
             assert_eq!(s.linear_solver, Some(LinearSolver::Iterative), "{s:?}");
             assert!(s.cg_iterations > 0, "{s:?}");
         }
+    }
+
+    /// The screening subset of a long sequence: 150 frames spanning it when its tracks
+    /// link them; none (the whole table) when two halves of the sequence share no track,
+    /// or when the sequence is short.
+    #[test]
+    fn the_screening_subset_spans_a_linked_sequence_only() {
+        let table = |nf: usize, bridge: bool| {
+            // 20 tracks in each half of the sequence, and 10 over all of it (`bridge`).
+            let np = 50;
+            let visible: Vec<bool> = (0..nf)
+                .flat_map(|f| {
+                    (0..np).map(move |p| match p {
+                        0..20 => f < nf / 2,
+                        20..40 => f >= nf / 2,
+                        _ => bridge,
+                    })
+                })
+                .collect();
+            Measurements::new(faer::Mat::zeros(2 * nf, np), visible)
+        };
+        let (frames, tracks) = screening_subset(&table(400, true), 150).expect("a subset");
+        assert_eq!(frames.len(), 150);
+        assert_eq!((frames[0], *frames.last().unwrap()), (0, 399));
+        assert_eq!(tracks.len(), 50);
+        assert!(screening_subset(&table(400, false), 150).is_none());
+        assert!(screening_subset(&table(300, true), 150).is_none());
+        assert!(screening_subset(&table(400, true), 0).is_none());
     }
 
     #[test]
