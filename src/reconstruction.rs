@@ -904,9 +904,8 @@ impl ModelSelection {
         let n = (2 * n_obs) as f64;
         let extra = (5 * n_frames).saturating_sub(8).max(1) as f64;
         let threshold = extra * n.max(1.0).ln();
-        let k = 11 * n_frames + 3 * n_points;
-        let (delta, sigma2) =
-            crate::robust::delta_chi2(affine_rms, projective_rms, n, k.saturating_sub(15));
+        let k = projective::degrees_of_freedom(n_frames, n_points);
+        let (delta, sigma2) = crate::robust::delta_chi2(affine_rms, projective_rms, n, k);
         let perspective = delta > threshold;
         Self {
             chosen: if perspective {
@@ -2553,7 +2552,7 @@ fn part_pretest(
     let pf = projective::fit(meas, start, &pcfg, 0, &mut crate::NoopObserver).ok()?;
     let (nf, np) = (meas.n_frames(), meas.n_points());
     let n = (2 * meas.n_observed()) as f64;
-    let k = (11 * nf + 3 * np).saturating_sub(15);
+    let k = projective::degrees_of_freedom(nf, np);
     let (delta, _) = crate::robust::delta_chi2(c.rms, pf.rms_px, n, k);
     // Akaike's 2 per parameter rather than the BIC's ln n: the pre-test only skips work,
     // so it skips only when even the lenient criterion sees nothing. Without perspective
@@ -2772,7 +2771,7 @@ fn readmission_within_noise(
         return None;
     }
     let k = b.len() - after.len();
-    let dof = (11 * meas.n_frames() + 3 * meas.n_points()).saturating_sub(15);
+    let dof = projective::degrees_of_freedom(meas.n_frames(), meas.n_points());
     let nu = (2 * meas.n_observed()).saturating_sub(dof) as f64;
     (k as f64 * tau * tau <= sigma * sigma * (2.0 * nu).sqrt()).then_some(k)
 }

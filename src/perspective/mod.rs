@@ -600,26 +600,19 @@ pub(crate) fn fit_lazy<'a>(
         };
         for (i, (report, start)) in starts.iter_mut().enumerate().skip(from) {
             (report.screen_frames, report.screen_tracks) = (screen_frames, screen_tracks);
-            let screened = match subset {
-                Some(sub) => adjust_graph(
-                    &sub.graph,
-                    start.select(&sub.frames, &sub.tracks),
-                    &screen_cfg,
-                    &assumed,
-                    false,
-                    run,
-                    &mut crate::NoopObserver,
-                ),
-                None => adjust_graph(
-                    &g,
-                    start.clone(),
-                    &screen_cfg,
-                    &assumed,
-                    false,
-                    run,
-                    &mut crate::NoopObserver,
-                ),
+            let (graph, start) = match subset {
+                Some(sub) => (&sub.graph, start.select(&sub.frames, &sub.tracks)),
+                None => (&g, start.clone()),
             };
+            let screened = adjust_graph(
+                graph,
+                start,
+                &screen_cfg,
+                &assumed,
+                false,
+                run,
+                &mut crate::NoopObserver,
+            );
             let Ok(sc) = screened else { continue };
             let cost = sc.report.final_cost;
             let n_res = (2 * screen_obs).max(1) as f64;
@@ -763,7 +756,7 @@ fn within_noise_of_projective(
 ) -> bool {
     let (nf, np) = (meas.n_frames() as f64, meas.n_points() as f64);
     let n_res = 2.0 * meas.n_observed() as f64;
-    let dof_p = (11 * meas.n_frames() + 3 * meas.n_points()).saturating_sub(15);
+    let dof_p = projective::degrees_of_freedom(meas.n_frames(), meas.n_points());
     let intrinsics = if cfg.intrinsics.focal_px.is_some() {
         0.0
     } else if cfg.per_frame_focal {

@@ -2624,6 +2624,17 @@ pub fn minimize_shared<M: BundleModel>(
                 unreachable!()
             };
             let mut rhs = rhs.clone();
+            // One conjugate-gradient solve of `S_λ x = b` on the iterative path: the step's,
+            // and its geodesic correction's.
+            let cg_solve = |parts: &ImplicitParts, b: &[f64]| {
+                implicit!(vinv, &parts.ucam, &parts.ugg, dcam, dglob).solve(
+                    &parts.blocks,
+                    lambda,
+                    b,
+                    cfg.cg_tolerance,
+                    cfg.cg_max_iterations,
+                )
+            };
             let split = |x: &dyn Fn(usize) -> f64| {
                 let dc: Vec<f64> = (0..nf * cd)
                     .map(|i| if is_fixed(i / cd) { 0.0 } else { x(i) })
@@ -2645,20 +2656,10 @@ pub fn minimize_shared<M: BundleModel>(
                         split(&|i| rhs[(i, 0)])
                     })
                 }
-                (_, _, Some(parts)) => {
-                    let imp = implicit!(vinv, &parts.ucam, &parts.ugg, dcam, dglob);
-                    imp.solve(
-                        &parts.blocks,
-                        lambda,
-                        rhs.col_as_slice(0),
-                        cfg.cg_tolerance,
-                        cfg.cg_max_iterations,
-                    )
-                    .map(|out| {
-                        cg_iterations += out.iterations;
-                        split(&|i| out.x[i])
-                    })
-                }
+                (_, _, Some(parts)) => cg_solve(parts, rhs.col_as_slice(0)).map(|out| {
+                    cg_iterations += out.iterations;
+                    split(&|i| out.x[i])
+                }),
                 _ => unreachable!(),
             };
             let solved =
@@ -2743,14 +2744,7 @@ pub fn minimize_shared<M: BundleModel>(
                             factor.solve(&pattern.llt, rhs.as_mut())
                         }
                         (_, _, Some(parts)) => {
-                            let imp = implicit!(vinv, &parts.ucam, &parts.ugg, dcam, dglob);
-                            let out = imp.solve(
-                                &parts.blocks,
-                                lambda,
-                                rhs.col_as_slice(0),
-                                cfg.cg_tolerance,
-                                cfg.cg_max_iterations,
-                            );
+                            let out = cg_solve(parts, rhs.col_as_slice(0));
                             for i in 0..ns {
                                 rhs[(i, 0)] = out.as_ref().map_or(f64::NAN, |o| o.x[i]);
                             }

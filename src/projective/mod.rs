@@ -270,6 +270,13 @@ impl ProjectiveModel {
     }
 }
 
+/// Degrees of freedom of a projective reconstruction of `n_frames` cameras and `n_points`
+/// points: `11F + 3N − 15` (3×4 cameras and homogeneous points up to scale, less the 4×4
+/// homography of the projective gauge); 0 when that is negative.
+pub fn degrees_of_freedom(n_frames: usize, n_points: usize) -> usize {
+    (11 * n_frames + 3 * n_points).saturating_sub(15)
+}
+
 /// `π(P X)` for a row-major 3×4 `P`: `(P₁X / P₃X, P₂X / P₃X)`.
 #[inline]
 pub fn project(c: &[f64; 12], x: &[f64; 4]) -> [f64; 2] {
