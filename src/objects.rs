@@ -15,7 +15,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use serde::Serialize;
 
-use crate::segment::{SegmentConfig, Segmentation, segment};
+use crate::segment::{SegmentConfig, Segmentation, segment_table};
 use crate::{Config, Id, Reconstruction, Result, TrackTable};
 
 /// One object's result.
@@ -164,9 +164,8 @@ pub fn reconstruct_objects(
     config: &Config,
     seg: &SegmentConfig,
 ) -> Result<MultiBody> {
-    let meas = table.measurements();
     let mut rng = StdRng::seed_from_u64(config.seed);
-    let segmentation = segment(&meas, seg, &mut rng)?;
+    let segmentation = segment_table(table, seg, &mut rng)?;
     let all_frames: Vec<usize> = (0..table.n_frames()).collect();
     let objects = segmentation
         .objects

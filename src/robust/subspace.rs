@@ -55,9 +55,20 @@
 //! cost as outliers in the MSAC score, so hypotheses (and refits) covering more frames and
 //! explaining more tracks are preferred, and LO's refit extends the best one to all frames.
 //!
-//! Complexity: fit O(F); residual O(k) per track; one MSAC evaluation O(#observations);
-//! sampling with missing data O(N · F/64) per draw (bitset intersections); refit O(F·N)
-//! for the SVD on complete data without a warm start, plus O(#observations) per ALS sweep.
+//! Complexity: fit O(F) for the model's arrays plus O(k) for the sample's shared frames;
+//! residual O(k) per track; one MSAC evaluation O(#observations); sampling with missing
+//! data O(N · s/64) per draw (bitset intersections over the words a track's frames span,
+//! `s` frames); refit O(F·N) for the SVD on complete data without a warm start, plus
+//! O(#observations) per ALS sweep (each chunk of tracks sums its normal equations over
+//! the frames its tracks span).
+//!
+//! Memory: the observations per track, 20 bytes an observed entry (16 on a complete
+//! table), read from a dense [`Measurements`] or a sparse [`crate::TrackTable`]
+//! ([`TrackSubspace::from_table`]) — no `2F × N` matrix — plus the usable frames' lists
+//! and bitsets: `O(#observations + N)`, shared by the estimators built from one another
+//! ([`TrackSubspace::with_exclusions_shared`]). A lookup of one entry by frame is
+//! `O(log k)` (`O(1)` for a track seen in every frame); the fits walk a track's entries
+//! in order.
 
 use faer::Mat;
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
@@ -207,19 +218,305 @@ pub(crate) fn trimmed_r2(ss: f64, k: usize, kept: usize) -> f64 {
     ss / (2.0 * kept as f64 - 3.0).max(1.0) / c
 }
 
-/// The track estimator over the columns of a [`Measurements`]; items are track indices.
+/// Every observed entry of every track, per track in frame order (compressed by track:
+/// track `p`'s entries are `start[p]..start[p + 1]`), shared by the estimators built from
+/// one another. `O(n_obs)` memory: 16 bytes an entry for its coordinates and 4 for its
+/// frame (no frame list when every track is seen in every frame).
+#[derive(Debug)]
+struct Columns {
+    n_frames: usize,
+    start: Vec<usize>,
+    /// Frame of each entry; empty when every track is seen in every frame (then entry `i`
+    /// of a track is frame `i`, see [`Columns::frames`]).
+    frame: Vec<u32>,
+    /// `0, 1, …, F − 1`: the frames of a complete track.
+    all_frames: Vec<u32>,
+    xy: Vec<[f64; 2]>,
+}
+
+impl Columns {
+    /// From a dense table: `O(F·N)`, on all cores. The mask is read by tiles of tracks,
+    /// each tile reading its run of every frame's row in order (as the rows are laid out),
+    /// and each track's coordinates from its column of `W`; no copy beyond the result.
+    fn from_measurements(meas: &Measurements) -> Self {
+        const TILE: usize = 256;
+        let (f, n) = (meas.n_frames(), meas.n_points());
+        let col = |p: usize| meas.w.col_as_slice(p);
+        if meas.is_complete() {
+            let mut xy = vec![[0.0; 2]; f * n];
+            xy.par_chunks_mut(f.max(1))
+                .enumerate()
+                .for_each(|(p, dst)| dst.as_flattened_mut().copy_from_slice(col(p)));
+            let start = (0..=n).map(|p| p * f).collect();
+            return Self::assemble(f, start, Vec::new(), xy);
+        }
+        let vis = |fr: usize, p0: usize, k: usize| &meas.visible[fr * n + p0..fr * n + p0 + k];
+        let mut len = vec![0usize; n];
+        len.par_chunks_mut(TILE)
+            .enumerate()
+            .for_each(|(tile, len)| {
+                for fr in 0..f {
+                    let row = vis(fr, tile * TILE, len.len());
+                    len.iter_mut()
+                        .zip(row)
+                        .for_each(|(l, &u)| *l += usize::from(u));
+                }
+            });
+        let mut start = Vec::with_capacity(n + 1);
+        start.push(0);
+        for l in &len {
+            start.push(start.last().unwrap() + l);
+        }
+        let total = start[n];
+        let (mut frame, mut xy) = (vec![0u32; total], vec![[0.0; 2]; total]);
+        // Each tile's tracks own one contiguous run of the entries.
+        let mut parts = Vec::with_capacity(n.div_ceil(TILE));
+        let (mut fr_rest, mut xy_rest) = (frame.as_mut_slice(), xy.as_mut_slice());
+        for p0 in (0..n).step_by(TILE) {
+            let k = start[(p0 + TILE).min(n)] - start[p0];
+            let (fa, fb) = fr_rest.split_at_mut(k);
+            let (xa, xb) = xy_rest.split_at_mut(k);
+            parts.push((p0, fa, xa));
+            (fr_rest, xy_rest) = (fb, xb);
+        }
+        parts.into_par_iter().for_each(|(p0, frames, xy)| {
+            let tl = TILE.min(n - p0);
+            let base = start[p0];
+            let mut at: Vec<usize> = (0..tl).map(|j| start[p0 + j] - base).collect();
+            for fr in 0..f {
+                for (j, &u) in vis(fr, p0, tl).iter().enumerate() {
+                    if u {
+                        frames[at[j]] = fr as u32;
+                        at[j] += 1;
+                    }
+                }
+            }
+            for j in 0..tl {
+                let c = col(p0 + j);
+                let (a, b) = (start[p0 + j] - base, start[p0 + j + 1] - base);
+                for (w, &fr) in xy[a..b].iter_mut().zip(&frames[a..b]) {
+                    let r = 2 * fr as usize;
+                    *w = [c[r], c[r + 1]];
+                }
+            }
+        });
+        Self::assemble(f, start, frame, xy)
+    }
+
+    /// From a sparse table: `O(n_obs)`.
+    fn from_table(table: &crate::TrackTable) -> Self {
+        let (start, entries) = table.by_track();
+        let frame = entries.iter().map(|e| e.0).collect();
+        let xy = entries.iter().map(|e| [e.1, e.2]).collect();
+        drop(entries);
+        Self::assemble(table.n_frames(), start, frame, xy)
+    }
+
+    /// The columns; the frame list dropped when every track is seen in every frame.
+    fn assemble(f: usize, start: Vec<usize>, mut frame: Vec<u32>, xy: Vec<[f64; 2]>) -> Self {
+        let n = start.len() - 1;
+        if xy.len() == f * n {
+            frame = Vec::new();
+        }
+        Self {
+            n_frames: f,
+            start,
+            frame,
+            all_frames: (0..f as u32).collect(),
+            xy,
+        }
+    }
+
+    fn n_tracks(&self) -> usize {
+        self.start.len() - 1
+    }
+
+    /// Track `p`'s observed frames, in order.
+    #[inline]
+    fn frames(&self, p: usize) -> &[u32] {
+        if self.frame.is_empty() {
+            &self.all_frames[..self.start[p + 1] - self.start[p]]
+        } else {
+            &self.frame[self.start[p]..self.start[p + 1]]
+        }
+    }
+
+    /// Track `p`'s observations, aligned with [`Self::frames`].
+    #[inline]
+    fn xy(&self, p: usize) -> &[[f64; 2]] {
+        &self.xy[self.start[p]..self.start[p + 1]]
+    }
+
+    /// Track `p`'s observation in frame `f`, `[0, 0]` when it has none there (as the dense
+    /// W holds). `O(1)` for a track seen in every frame of its span (a track that enters
+    /// and leaves once), else `O(log k)`.
+    #[inline]
+    fn get(&self, p: usize, f: usize) -> [f64; 2] {
+        let (a, b) = (self.start[p], self.start[p + 1]);
+        let k = b - a;
+        if k == self.n_frames {
+            return self.xy[a + f];
+        }
+        let fr = &self.frame[a..b];
+        let (Some(&first), Some(&last)) = (fr.first(), fr.last()) else {
+            return [0.0, 0.0];
+        };
+        let (first, last) = (first as usize, last as usize);
+        if f < first || f > last {
+            return [0.0, 0.0];
+        }
+        if last - first + 1 == k {
+            return self.xy[a + f - first];
+        }
+        match fr.binary_search(&(f as u32)) {
+            Ok(i) => self.xy[a + i],
+            Err(_) => [0.0, 0.0],
+        }
+    }
+
+    /// The tracks `tracks` on the frames `a..b` (renumbered from 0): `O(Σ log k + n_obs of
+    /// the result)`.
+    fn select(&self, a: usize, b: usize, tracks: &[usize]) -> Self {
+        let mut start = Vec::with_capacity(tracks.len() + 1);
+        start.push(0);
+        let (mut frame, mut xy) = (Vec::new(), Vec::new());
+        for &p in tracks {
+            let fr = self.frames(p);
+            let lo = fr.partition_point(|&x| (x as usize) < a);
+            let hi = fr.partition_point(|&x| (x as usize) < b);
+            frame.extend(fr[lo..hi].iter().map(|&x| x - a as u32));
+            xy.extend_from_slice(&self.xy(p)[lo..hi]);
+            start.push(xy.len());
+        }
+        Self::assemble(b - a, start, frame, xy)
+    }
+}
+
+/// Track `p`'s usable entries `(frame, observation)` in frame order: its usable frames
+/// walked beside its observed ones (a subset of them, both sorted).
+struct Usable<'a> {
+    usable: std::slice::Iter<'a, u32>,
+    frames: &'a [u32],
+    xy: &'a [[f64; 2]],
+    j: usize,
+    /// Every observed entry is usable: the `j`-th usable entry is the `j`-th observed one.
+    all: bool,
+}
+
+impl Iterator for Usable<'_> {
+    type Item = (u32, [f64; 2]);
+
+    #[inline]
+    fn next(&mut self) -> Option<(u32, [f64; 2])> {
+        let f = *self.usable.next()?;
+        if !self.all {
+            while self.frames[self.j] != f {
+                self.j += 1;
+            }
+        }
+        let out = (f, self.xy[self.j]);
+        self.j += 1;
+        Some(out)
+    }
+}
+
+/// Per track, a bitset of its usable frames over the words its frames span: track `p`'s
+/// words `bits[start[p]..start[p + 1]]` cover frames from `64 · lo[p]` on. `O(Σ span/64)`
+/// memory, at most one word per usable entry plus one per track.
+#[derive(Debug, Clone)]
+struct Spans {
+    lo: Vec<usize>,
+    start: Vec<usize>,
+    bits: Vec<u64>,
+}
+
+/// A bitset over frames, from word `lo` on.
+#[derive(Debug, Clone)]
+struct FrameMask {
+    lo: usize,
+    words: Vec<u64>,
+}
+
+impl Spans {
+    fn new(frames_of: &[Vec<u32>]) -> Self {
+        let n = frames_of.len();
+        let (mut lo, mut start) = (Vec::with_capacity(n), Vec::with_capacity(n + 1));
+        start.push(0);
+        let mut bits = Vec::new();
+        for fr in frames_of {
+            let (first, last) = match (fr.first(), fr.last()) {
+                (Some(&a), Some(&b)) => (a as usize / 64, b as usize / 64 + 1),
+                _ => (0, 0),
+            };
+            let base = bits.len();
+            bits.resize(base + last - first, 0);
+            for &f in fr {
+                bits[base + f as usize / 64 - first] |= 1u64 << (f % 64);
+            }
+            lo.push(first);
+            start.push(bits.len());
+        }
+        Self { lo, start, bits }
+    }
+
+    fn words(&self, p: usize) -> &[u64] {
+        &self.bits[self.start[p]..self.start[p + 1]]
+    }
+
+    fn mask(&self, p: usize) -> FrameMask {
+        FrameMask {
+            lo: self.lo[p],
+            words: self.words(p).to_vec(),
+        }
+    }
+
+    /// Usable frames of `p` in `mask`.
+    fn overlap(&self, p: usize, mask: &FrameMask) -> usize {
+        let w = self.words(p);
+        let (a, b) = (
+            self.lo[p].max(mask.lo),
+            (self.lo[p] + w.len()).min(mask.lo + mask.words.len()),
+        );
+        (a..b)
+            .map(|k| (w[k - self.lo[p]] & mask.words[k - mask.lo]).count_ones() as usize)
+            .sum()
+    }
+
+    /// `mask ∩ (usable frames of p)`.
+    fn intersect(&self, p: usize, mask: &mut FrameMask) {
+        let w = self.words(p);
+        for (k, m) in mask.words.iter_mut().enumerate() {
+            let g = mask.lo + k;
+            *m &= if g >= self.lo[p] && g < self.lo[p] + w.len() {
+                w[g - self.lo[p]]
+            } else {
+                0
+            };
+        }
+    }
+
+    /// Whether frame `f` is a usable frame of `p`.
+    #[inline]
+    fn has(&self, p: usize, f: usize) -> bool {
+        let k = f / 64;
+        let w = self.words(p);
+        k >= self.lo[p] && k < self.lo[p] + w.len() && w[k - self.lo[p]] & (1u64 << (f % 64)) != 0
+    }
+}
+
+/// The track estimator over the columns of a [`Measurements`] or a sparse
+/// [`crate::TrackTable`]; items are track indices.
 #[derive(Debug, Clone)]
 pub struct TrackSubspace {
     f: usize,
     n: usize,
-    /// Column-major copy of W: `obs[p * 2F + r]`, shared by the estimators built from one
-    /// another ([`Self::with_exclusions_shared`], clones).
-    obs: Arc<Vec<f64>>,
+    /// Every observed entry per track, shared by the estimators built from one another
+    /// ([`Self::with_exclusions_shared`], clones).
+    cols: Arc<Columns>,
     /// Usable frames (observed and not excluded) per track.
     frames_of: Vec<Vec<u32>>,
-    /// Bitset of usable frames per track, `words` u64 each.
-    bits: Vec<u64>,
-    words: usize,
+    /// Bitsets of the usable frames per track, over the words each track spans.
+    spans: Spans,
     /// Tracks with at least `min_overlap` usable frames.
     eligible: Vec<usize>,
     complete: bool,
@@ -236,6 +533,9 @@ const ALS_TOLERANCE: f64 = 1e-6;
 
 /// Tracks per chunk of the ALS M-step's parallel accumulation.
 const ALS_CHUNK: usize = 256;
+
+/// Chunks of the ALS M-step whose partial sums are held at once.
+const ALS_BATCH: usize = 64;
 
 /// `sqrt(2 ln 2)`: the median of the distance of a 2D standard Gaussian.
 const RAYLEIGH_MEDIAN: f64 = 1.177_410_022_515_474_8;
@@ -280,6 +580,15 @@ fn frame_dist2(m: &[f64], fr: u32, y: &[f64; 2], s: &[f64; 3]) -> f64 {
     ex * ex + ey * ey
 }
 
+/// Squared image distance of the observation `w` in frame `fr` to `M_f s + t_f`.
+#[inline]
+fn dist2_to(model: &AffineSubspace, fr: usize, s: &[f64; 3], w: [f64; 2]) -> f64 {
+    let q = model.predict(fr, s);
+    let dx = q[0] - w[0];
+    let dy = q[1] - w[1];
+    dx * dx + dy * dy
+}
+
 /// Least-squares `s = argmin Σ_i ‖M_{fr_i} s − y_i‖²` over the local indices `idx`
 /// (normal equations, [`solve3`]).
 #[inline]
@@ -320,83 +629,68 @@ impl TrackSubspace {
         Self::with_exclusions(meas, cfg, &[])
     }
 
+    /// Builds the estimator for all tracks of a sparse `table`, with no excluded entry:
+    /// `O(n_obs)` time and memory (no `2F × N` matrix).
+    pub fn from_table(table: &crate::TrackTable, cfg: &SubspaceConfig) -> Self {
+        Self::build(Arc::new(Columns::from_table(table)), cfg, &[])
+    }
+
     /// Builds the estimator with the given (frame, track) entries treated as unobserved.
     pub fn with_exclusions(
         meas: &Measurements,
         cfg: &SubspaceConfig,
         excluded: &[(usize, usize)],
     ) -> Self {
-        let rows = 2 * meas.n_frames();
-        let mut obs = vec![0.0; rows * meas.n_points()];
-        obs.par_chunks_exact_mut(rows.max(1))
-            .enumerate()
-            .for_each(|(p, col)| col.copy_from_slice(meas.w.col_as_slice(p)));
-        Self::build(Arc::new(obs), meas, cfg, excluded)
+        Self::build(Arc::new(Columns::from_measurements(meas)), cfg, excluded)
     }
 
     /// [`Self::with_exclusions`] of the measurements this estimator was built from (`meas`
-    /// must be them) and its settings, sharing its copy of `W` instead of making another:
-    /// `O(F·N)` time for the mask, no `2F·N` copy.
+    /// must be them) and its settings, sharing its copy of the observations instead of
+    /// making another: `O(n_obs + E log E)` for `E` exclusions.
     pub fn with_exclusions_shared(&self, meas: &Measurements, excluded: &[(usize, usize)]) -> Self {
         debug_assert_eq!((meas.n_frames(), meas.n_points()), (self.f, self.n));
-        Self::build(Arc::clone(&self.obs), meas, &self.cfg, excluded)
+        Self::build(Arc::clone(&self.cols), &self.cfg, excluded)
     }
 
-    fn build(
-        obs: Arc<Vec<f64>>,
-        meas: &Measurements,
-        cfg: &SubspaceConfig,
-        excluded: &[(usize, usize)],
-    ) -> Self {
-        let (f, n) = (meas.n_frames(), meas.n_points());
-        let mut usable = meas.visible.clone();
-        for &(fr, p) in excluded {
-            if fr < f && p < n {
-                usable[fr * n + p] = false;
-            }
-        }
-        let words = f.div_ceil(64).max(1);
-        let mut bits = vec![0u64; words * n];
-        // By tiles of tracks, each tile reading its run of every frame's mask row in order:
-        // the tracks' frame counts, then their frame lists at their exact sizes. (On one
-        // core: filling them on all cores was no faster end to end and raised the peak
-        // resident size of a 1000 × 20 000 run by 90 MB, docs/results.md.)
-        const TILE: usize = 256;
-        let mut len = vec![0u32; n];
-        for (tile, len) in len.chunks_mut(TILE).enumerate() {
-            let p0 = tile * TILE;
-            for fr in 0..f {
-                let row = &usable[fr * n + p0..fr * n + p0 + len.len()];
-                len.iter_mut()
-                    .zip(row)
-                    .for_each(|(l, &u)| *l += u32::from(u));
-            }
-        }
-        let mut frames_of: Vec<Vec<u32>> = len
+    /// The estimator of the tracks `tracks` (indices here) on the frames `a..b` (renumbered
+    /// from 0), every observed entry of theirs there usable, with the same settings:
+    /// what [`Self::new`] builds from `meas.select(a..b, tracks)`, in `O(n_obs` of the
+    /// result `+ Σ log k)` instead of `O((b − a) · |tracks|)`.
+    pub fn select(&self, a: usize, b: usize, tracks: &[usize]) -> Self {
+        Self::build(Arc::new(self.cols.select(a, b, tracks)), &self.cfg, &[])
+    }
+
+    fn build(cols: Arc<Columns>, cfg: &SubspaceConfig, excluded: &[(usize, usize)]) -> Self {
+        let (f, n) = (cols.n_frames, cols.n_tracks());
+        // The exclusions by track, then each track's observed frames without them.
+        let mut by_track: Vec<(usize, u32)> = excluded
             .iter()
-            .map(|&l| Vec::with_capacity(l as usize))
+            .filter(|&&(fr, p)| fr < f && p < n)
+            .map(|&(fr, p)| (p, fr as u32))
             .collect();
-        for (tile, (lists, bits)) in frames_of
-            .chunks_mut(TILE)
-            .zip(bits.chunks_mut(TILE * words))
-            .enumerate()
-        {
-            let p0 = tile * TILE;
-            for fr in 0..f {
-                let row = &usable[fr * n + p0..fr * n + p0 + lists.len()];
-                for (j, (list, &u)) in lists.iter_mut().zip(row).enumerate() {
-                    if u {
-                        list.push(fr as u32);
-                        bits[j * words + fr / 64] |= 1u64 << (fr % 64);
-                    }
+        by_track.sort_unstable();
+        let mut e = 0;
+        let frames_of: Vec<Vec<u32>> = (0..n)
+            .map(|p| {
+                let fr = cols.frames(p);
+                let b = e + by_track[e..].partition_point(|x| x.0 == p);
+                let ex = &by_track[e..b];
+                e = b;
+                if ex.is_empty() {
+                    return fr.to_vec();
                 }
-            }
-        }
+                fr.iter()
+                    .copied()
+                    .filter(|x| ex.binary_search(&(p, *x)).is_err())
+                    .collect()
+            })
+            .collect();
+        let spans = Spans::new(&frames_of);
         let min_overlap = cfg.min_overlap.clamp(2, f.max(2));
         let eligible: Vec<usize> = (0..n)
             .filter(|&p| frames_of[p].len() >= min_overlap)
             .collect();
-        let complete = usable.iter().all(|&u| u);
+        let complete = frames_of.iter().all(|v| v.len() == f);
         let mut lens: Vec<f64> = frames_of.iter().map(|v| v.len() as f64).collect();
         let med = if lens.is_empty() {
             min_overlap as f64
@@ -407,10 +701,9 @@ impl TrackSubspace {
         Self {
             f,
             n,
-            obs,
+            cols,
             frames_of,
-            bits,
-            words,
+            spans,
             eligible,
             complete,
             cfg: cfg.clone(),
@@ -444,33 +737,36 @@ impl TrackSubspace {
         &self.frames_of[p]
     }
 
+    /// Track `p`'s usable entries `(frame, observation)`, in frame order.
     #[inline]
-    fn w(&self, p: usize, r: usize) -> f64 {
-        self.obs[p * 2 * self.f + r]
+    fn usable(&self, p: usize) -> Usable<'_> {
+        let frames = self.cols.frames(p);
+        Usable {
+            usable: self.frames_of[p].iter(),
+            frames,
+            xy: self.cols.xy(p),
+            j: 0,
+            all: frames.len() == self.frames_of[p].len(),
+        }
     }
 
-    /// Observed image point of track `p` in frame `f` (whether usable or not).
+    /// Observed image point of track `p` in frame `f` (whether usable or not; `[0, 0]`
+    /// where it is not observed).
+    #[inline]
     pub fn observation(&self, f: usize, p: usize) -> [f64; 2] {
-        [self.w(p, 2 * f), self.w(p, 2 * f + 1)]
-    }
-
-    fn overlap_count(&self, p: usize, mask: &[u64]) -> usize {
-        (0..self.words)
-            .map(|k| (self.bits[p * self.words + k] & mask[k]).count_ones() as usize)
-            .sum()
+        self.cols.get(p, f)
     }
 
     /// Least-squares coordinates of track `p` from `frames` (which must be defined);
     /// `None` when they are not determined.
     pub fn ls_coords(&self, model: &AffineSubspace, p: usize, frames: &[u32]) -> Option<[f64; 3]> {
-        let rows = 2 * self.f;
-        let w = &self.obs[p * rows..(p + 1) * rows];
         let t = &model.t;
         normal_solve_rows(
             &model.m,
             frames.iter().map(|&fr| {
                 let f = fr as usize;
-                (f, [w[2 * f] - t[2 * f], w[2 * f + 1] - t[2 * f + 1]])
+                let w = self.cols.get(p, f);
+                (f, [w[0] - t[2 * f], w[1] - t[2 * f + 1]])
             }),
         )
     }
@@ -478,10 +774,7 @@ impl TrackSubspace {
     /// Squared image distance of track `p`'s observation in frame `fr` to `M_f s + t_f`.
     #[inline]
     pub fn dist2(&self, model: &AffineSubspace, p: usize, fr: usize, s: &[f64; 3]) -> f64 {
-        let q = model.predict(fr, s);
-        let dx = q[0] - self.w(p, 2 * fr);
-        let dy = q[1] - self.w(p, 2 * fr + 1);
-        dx * dx + dy * dy
+        dist2_to(model, fr, s, self.cols.get(p, fr))
     }
 
     /// Trimmed robust fit of track `p` (see the module documentation); `None` when the
@@ -494,15 +787,13 @@ impl TrackSubspace {
     }
 
     fn track_fit_in(&self, model: &AffineSubspace, p: usize, sc: &mut Scratch) -> Option<TrackFit> {
-        let rows = 2 * self.f;
-        let w = &self.obs[p * rows..(p + 1) * rows];
         sc.fr.clear();
         sc.y.clear();
-        for &fr in &self.frames_of[p] {
+        for (fr, w) in self.usable(p) {
             let f = fr as usize;
             if model.defined[f] {
                 sc.fr.push(fr);
-                sc.y.push([w[2 * f] - model.t[2 * f], w[2 * f + 1] - model.t[2 * f + 1]]);
+                sc.y.push([w[0] - model.t[2 * f], w[1] - model.t[2 * f + 1]]);
             }
         }
         let k = sc.fr.len();
@@ -620,12 +911,13 @@ impl TrackSubspace {
         let k = inliers.len() as f64;
         // Row means, summed column by column (each row's sum still in inlier order).
         let mut t = vec![0.0; rows];
+        // Complete: each column is its track's observations in frame order.
+        let col = |p: usize| self.cols.xy(p).as_flattened();
         for &p in inliers {
-            let col = &self.obs[p * rows..(p + 1) * rows];
-            t.iter_mut().zip(col).for_each(|(tr, &w)| *tr += w);
+            t.iter_mut().zip(col(p)).for_each(|(tr, &w)| *tr += w);
         }
         t.iter_mut().for_each(|tr| *tr /= k);
-        let x = Mat::from_fn(rows, inliers.len(), |r, j| self.w(inliers[j], r) - t[r]);
+        let x = Mat::from_fn(rows, inliers.len(), |r, j| col(inliers[j])[r] - t[r]);
         let svd = truncated_svd(x.as_ref(), 3, &TruncatedSvdConfig::default()).ok()?;
         if svd.s.len() < 3 || !(svd.s[2] > 0.0) {
             return None;
@@ -644,6 +936,22 @@ impl TrackSubspace {
         })
     }
 
+    /// The frames `lo..hi` the usable entries of `tracks` span (`0..0` when none).
+    fn span_of(&self, tracks: &[usize]) -> (usize, usize) {
+        let lo = tracks
+            .iter()
+            .filter_map(|&p| self.frames_of[p].first())
+            .min();
+        let hi = tracks
+            .iter()
+            .filter_map(|&p| self.frames_of[p].last())
+            .max();
+        match (lo, hi) {
+            (Some(&lo), Some(&hi)) => (lo as usize, hi as usize + 1),
+            _ => (0, 0),
+        }
+    }
+
     /// Alternating least squares with hard rejection of outlying entries; also returns the
     /// entries the last sweep gave zero weight (see [`TrackSubspace::refit_reporting`]).
     fn als(
@@ -652,6 +960,9 @@ impl TrackSubspace {
         inliers: &[usize],
         sweeps: usize,
     ) -> Option<(AffineSubspace, Vec<(usize, usize)>)> {
+        if inliers.is_empty() {
+            return None;
+        }
         let f = self.f;
         // Entry weights, aligned with frames_of of each inlier.
         let mut keep: Vec<Vec<bool>> = inliers
@@ -670,62 +981,79 @@ impl TrackSubspace {
                 .par_iter()
                 .zip(keep.par_iter())
                 .with_min_len(64)
-                .map_init(Vec::new, |frames_buf: &mut Vec<u32>, (&p, kp)| {
-                    frames_buf.clear();
-                    frames_buf.extend(
-                        self.frames_of[p]
-                            .iter()
-                            .zip(kp)
-                            .filter(|(fr, k)| **k && model.defined[**fr as usize])
-                            .map(|(fr, _)| *fr),
-                    );
-                    if frames_buf.len() >= 2 {
-                        self.ls_coords(&model, p, frames_buf)
-                    } else {
-                        None
+                .map(|(&p, kp)| {
+                    let used = |fr: u32, k: bool| k && model.defined[fr as usize];
+                    let count = self.frames_of[p]
+                        .iter()
+                        .zip(kp)
+                        .filter(|(fr, k)| used(**fr, **k))
+                        .count();
+                    if count < 2 {
+                        return None;
                     }
+                    let t = &model.t;
+                    normal_solve_rows(
+                        &model.m,
+                        self.usable(p)
+                            .zip(kp)
+                            .filter(|((fr, _), k)| used(*fr, **k))
+                            .map(|((fr, w), _)| {
+                                let f = fr as usize;
+                                (f, [w[0] - t[2 * f], w[1] - t[2 * f + 1]])
+                            }),
+                    )
                 })
                 .collect();
             // M-step: per frame, [m_x t_x; m_y t_y] from Σ [s;1][s;1]ᵀ.
             // Accumulated in parallel over fixed chunks of tracks, then summed in chunk
             // order (the result does not depend on the thread count).
-            let (a, bx, by, cnt) = inliers
-                .par_chunks(ALS_CHUNK)
-                .enumerate()
-                .map(|(c, chunk)| {
-                    let mut a = vec![Matrix4::<f64>::zeros(); f];
-                    let mut bx = vec![Vector4::<f64>::zeros(); f];
-                    let mut by = vec![Vector4::<f64>::zeros(); f];
-                    let mut cnt = vec![0usize; f];
-                    for (jj, &p) in chunk.iter().enumerate() {
-                        let j = c * ALS_CHUNK + jj;
-                        let Some(s) = coords[j] else { continue };
-                        let v = Vector4::new(s[0], s[1], s[2], 1.0);
-                        let vv = v * v.transpose();
-                        for (&fr, &k) in self.frames_of[p].iter().zip(&keep[j]) {
-                            if !k {
-                                continue;
+            // Each chunk's sums cover the frames its tracks span, and the chunks are taken
+            // ALS_BATCH at a time: memory O(ALS_BATCH · span + F), not O(F · N / chunk).
+            let mut a = vec![Matrix4::<f64>::zeros(); f];
+            let mut bx = vec![Vector4::<f64>::zeros(); f];
+            let mut by = vec![Vector4::<f64>::zeros(); f];
+            let mut cnt = vec![0usize; f];
+            let n_chunks = inliers.len().div_ceil(ALS_CHUNK);
+            for b0 in (0..n_chunks).step_by(ALS_BATCH) {
+                let parts: Vec<_> = (b0..(b0 + ALS_BATCH).min(n_chunks))
+                    .into_par_iter()
+                    .map(|c| {
+                        let j0 = c * ALS_CHUNK;
+                        let chunk = &inliers[j0..(j0 + ALS_CHUNK).min(inliers.len())];
+                        let (lo, hi) = self.span_of(chunk);
+                        let mut a = vec![Matrix4::<f64>::zeros(); hi - lo];
+                        let mut bx = vec![Vector4::<f64>::zeros(); hi - lo];
+                        let mut by = vec![Vector4::<f64>::zeros(); hi - lo];
+                        let mut cnt = vec![0usize; hi - lo];
+                        for (jj, &p) in chunk.iter().enumerate() {
+                            let j = j0 + jj;
+                            let Some(s) = coords[j] else { continue };
+                            let v = Vector4::new(s[0], s[1], s[2], 1.0);
+                            let vv = v * v.transpose();
+                            for ((fr, w), &k) in self.usable(p).zip(&keep[j]) {
+                                if !k {
+                                    continue;
+                                }
+                                let i = fr as usize - lo;
+                                a[i] += vv;
+                                bx[i] += v * w[0];
+                                by[i] += v * w[1];
+                                cnt[i] += 1;
                             }
-                            let fr = fr as usize;
-                            a[fr] += vv;
-                            bx[fr] += v * self.w(p, 2 * fr);
-                            by[fr] += v * self.w(p, 2 * fr + 1);
-                            cnt[fr] += 1;
                         }
+                        (lo, a, bx, by, cnt)
+                    })
+                    .collect();
+                // Summed in chunk order (adding a chunk's zeros elsewhere changes nothing).
+                for (lo, pa, pbx, pby, pc) in parts {
+                    for i in 0..pa.len() {
+                        a[lo + i] += pa[i];
+                        bx[lo + i] += pbx[i];
+                        by[lo + i] += pby[i];
+                        cnt[lo + i] += pc[i];
                     }
-                    (a, bx, by, cnt)
-                })
-                .collect::<Vec<_>>()
-                .into_iter()
-                .reduce(|mut acc, part| {
-                    for fr in 0..f {
-                        acc.0[fr] += part.0[fr];
-                        acc.1[fr] += part.1[fr];
-                        acc.2[fr] += part.2[fr];
-                        acc.3[fr] += part.3[fr];
-                    }
-                    acc
-                })?;
+                }
+            }
             for fr in 0..f {
                 let sol = if cnt[fr] >= 4 {
                     solve_camera(&a[fr], &bx[fr], &by[fr])
@@ -751,9 +1079,9 @@ impl TrackSubspace {
                 .with_min_len(ALS_CHUNK)
                 .for_each(|(d2, (&p, s))| {
                     d2.clear();
-                    d2.extend(self.frames_of[p].iter().map(|&fr| match s {
+                    d2.extend(self.usable(p).map(|(fr, w)| match s {
                         Some(s) if model.defined[fr as usize] => {
-                            self.dist2(&model, p, fr as usize, s)
+                            dist2_to(&model, fr as usize, s, w)
                         }
                         _ => f64::NAN,
                     }));
@@ -779,18 +1107,20 @@ impl TrackSubspace {
             let (scored, within) = inliers
                 .par_chunks(ALS_CHUNK)
                 .zip(d2s.par_chunks(ALS_CHUNK))
-                .map(|(ps, ds)| {
-                    let (mut scored, mut within) = (vec![0usize; f], vec![0usize; f]);
-                    for (&p, d2s) in ps.iter().zip(ds) {
-                        for (&fr, &d2) in self.frames_of[p].iter().zip(d2s) {
-                            if !d2.is_nan() {
-                                scored[fr as usize] += 1;
-                                within[fr as usize] += usize::from(d2 <= cut2 || cut2 == 0.0);
+                .fold(
+                    || (vec![0usize; f], vec![0usize; f]),
+                    |(mut scored, mut within), (ps, ds)| {
+                        for (&p, d2s) in ps.iter().zip(ds) {
+                            for (&fr, &d2) in self.frames_of[p].iter().zip(d2s) {
+                                if !d2.is_nan() {
+                                    scored[fr as usize] += 1;
+                                    within[fr as usize] += usize::from(d2 <= cut2 || cut2 == 0.0);
+                                }
                             }
                         }
-                    }
-                    (scored, within)
-                })
+                        (scored, within)
+                    },
+                )
                 .reduce(
                     || (vec![0usize; f], vec![0usize; f]),
                     |(mut s, mut w), (s2, w2)| {
@@ -865,22 +1195,20 @@ impl Estimator for TrackSubspace {
             }
             return true;
         }
-        let mut mask: Vec<u64> = self.bits[first * self.words..(first + 1) * self.words].to_vec();
+        let mut mask = self.spans.mask(first);
         let mut cand = Vec::new();
         while out.len() < 4 {
             cand.clear();
             cand.extend(
                 e.iter().copied().filter(|c| {
-                    !out.contains(c) && self.overlap_count(*c, &mask) >= self.min_overlap
+                    !out.contains(c) && self.spans.overlap(*c, &mask) >= self.min_overlap
                 }),
             );
             if cand.is_empty() {
                 return false;
             }
             let c = cand[rng.random_range(0..cand.len())];
-            for k in 0..self.words {
-                mask[k] &= self.bits[c * self.words + k];
-            }
+            self.spans.intersect(c, &mut mask);
             out.push(c);
         }
         true
@@ -891,37 +1219,36 @@ impl Estimator for TrackSubspace {
             return None;
         }
         let f = self.f;
-        let mut defined = vec![false; f];
-        let mut nd = 0;
-        for fr in 0..f {
-            let word = fr / 64;
-            let bit = 1u64 << (fr % 64);
-            if sample
-                .iter()
-                .all(|&p| self.bits[p * self.words + word] & bit != 0)
-            {
-                defined[fr] = true;
-                nd += 1;
-            }
-        }
-        if nd < self.min_overlap {
+        // The frames all four use, and the four tracks' observations there (a cursor in
+        // each track's observed frames).
+        let shared: Vec<u32> = self.frames_of[sample[0]]
+            .iter()
+            .copied()
+            .filter(|&fr| sample[1..].iter().all(|&p| self.spans.has(p, fr as usize)))
+            .collect();
+        if shared.len() < self.min_overlap {
             return None;
         }
-        let (a, rest) = (sample[0], &sample[1..]);
+        let mut defined = vec![false; f];
         let mut m = vec![0.0; 6 * f];
         let mut t = vec![0.0; 2 * f];
         let mut g = Matrix3::<f64>::zeros();
-        for fr in 0..f {
-            if !defined[fr] {
-                continue;
+        let mut cursor = [0usize; 4];
+        for &fr in &shared {
+            let mut w = [[0.0; 2]; 4];
+            for (k, &p) in sample.iter().enumerate() {
+                let frames = self.cols.frames(p);
+                while frames[cursor[k]] != fr {
+                    cursor[k] += 1;
+                }
+                w[k] = self.cols.xy(p)[cursor[k]];
             }
-            for r in [2 * fr, 2 * fr + 1] {
-                t[r] = self.w(a, r);
-                let v = Vector3::new(
-                    self.w(rest[0], r) - t[r],
-                    self.w(rest[1], r) - t[r],
-                    self.w(rest[2], r) - t[r],
-                );
+            let fr = fr as usize;
+            defined[fr] = true;
+            for c in 0..2 {
+                let r = 2 * fr + c;
+                t[r] = w[0][c];
+                let v = Vector3::new(w[1][c] - t[r], w[2][c] - t[r], w[3][c] - t[r]);
                 m[3 * r..3 * r + 3].copy_from_slice(v.as_slice());
                 g += v * v.transpose();
             }
@@ -988,5 +1315,155 @@ impl Estimator for TrackSubspace {
     fn threshold_multiple(&self, p: f64) -> f64 {
         let nu = (2 * self.min_overlap) as f64 - 3.0;
         (super::chi2_quantile(nu, p) / nu).sqrt()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{OutlierKind, SynthConfig, generate};
+    use rand::SeedableRng;
+    use rand::rngs::StdRng;
+
+    fn table(missing: f64, seed: u64) -> crate::TrackTable {
+        generate(&SynthConfig {
+            frames: 150,
+            points: 120,
+            missing,
+            outliers: 0.1,
+            outlier_kind: OutlierKind::RandomWalk,
+            gross: 0.02,
+            seed,
+            ..Default::default()
+        })
+        .unwrap()
+        .table
+    }
+
+    fn same_model(a: &AffineSubspace, b: &AffineSubspace) {
+        assert_eq!(a.defined, b.defined);
+        assert!(
+            a.m.iter()
+                .zip(&b.m)
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        );
+        assert!(
+            a.t.iter()
+                .zip(&b.t)
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        );
+    }
+
+    /// Two estimators of the same tracks agree in every usable frame, observation, sample,
+    /// hypothesis, residual and refit, bit for bit.
+    fn same_estimator(a: &TrackSubspace, b: &TrackSubspace, seed: u64) {
+        assert_eq!((a.n_frames(), a.n_tracks()), (b.n_frames(), b.n_tracks()));
+        assert_eq!(a.complete, b.complete);
+        for p in 0..a.n_tracks() {
+            assert_eq!(a.frames_of(p), b.frames_of(p), "track {p}");
+            for f in 0..a.n_frames() {
+                assert_eq!(a.observation(f, p), b.observation(f, p), "({f}, {p})");
+            }
+        }
+        let (mut ra, mut rb) = (StdRng::seed_from_u64(seed), StdRng::seed_from_u64(seed));
+        let (mut sa, mut sb) = (Vec::new(), Vec::new());
+        let mut fitted = 0;
+        for _ in 0..40 {
+            assert_eq!(a.sample(4, &mut ra, &mut sa), b.sample(4, &mut rb, &mut sb));
+            assert_eq!(sa, sb);
+            let (Some(ma), Some(mb)) = (a.fit(&sa), b.fit(&sb)) else {
+                continue;
+            };
+            same_model(&ma, &mb);
+            let (fa, fb) = (
+                a.residuals(&ma, a.n_tracks()),
+                b.residuals(&mb, b.n_tracks()),
+            );
+            assert_eq!(fa, fb);
+            let inliers: Vec<usize> = (0..a.n_tracks()).filter(|&p| fa[p].is_some()).collect();
+            let (Some((ra2, ea)), Some((rb2, eb))) = (
+                a.refit_reporting(&ma, &inliers, 8),
+                b.refit_reporting(&mb, &inliers, 8),
+            ) else {
+                continue;
+            };
+            same_model(&ra2, &rb2);
+            assert_eq!(ea, eb);
+            fitted += 1;
+        }
+        assert!(fitted >= 5, "{fitted} refits compared");
+    }
+
+    /// The estimator of a sparse table is the one of its dense matrix: with entries
+    /// missing, complete, and with exclusions.
+    #[test]
+    fn the_sparse_tables_estimator_is_the_dense_ones() {
+        let cfg = SubspaceConfig::default();
+        for (missing, seed) in [(0.5, 1), (0.0, 2)] {
+            let t = table(missing, seed);
+            let meas = t.measurements();
+            let dense = TrackSubspace::new(&meas, &cfg);
+            let sparse = TrackSubspace::from_table(&t, &cfg);
+            same_estimator(&dense, &sparse, seed);
+            // Every 7th observed entry excluded, on both (shared columns and a fresh copy).
+            let excluded: Vec<(usize, usize)> = meas
+                .observed_pairs()
+                .enumerate()
+                .filter(|(i, _)| i % 7 == 0)
+                .map(|(_, e)| e)
+                .collect();
+            let a = TrackSubspace::with_exclusions(&meas, &cfg, &excluded);
+            let b = sparse.with_exclusions_shared(&meas, &excluded);
+            assert!(b.frames_of(0).len() < t.track_len(0) || t.track_len(0) == 0);
+            same_estimator(&a, &b, seed + 10);
+        }
+    }
+
+    /// [`TrackSubspace::select`] is the estimator of the selected sub-table, and the
+    /// per-track bitsets count the frames two tracks share as their frame lists do.
+    #[test]
+    fn a_selected_window_is_the_estimator_of_its_sub_table() {
+        let cfg = SubspaceConfig::default();
+        let t = table(0.6, 3);
+        let meas = t.measurements();
+        let all = TrackSubspace::from_table(&t, &cfg);
+        let (a, b) = (40, 110);
+        let tracks: Vec<usize> = (0..t.n_tracks())
+            .filter(|&p| {
+                let fr = all.frames_of(p);
+                fr.iter()
+                    .filter(|&&x| (a..b).contains(&(x as usize)))
+                    .count()
+                    >= 3
+            })
+            .collect();
+        let frames: Vec<usize> = (a..b).collect();
+        let want = TrackSubspace::new(&meas.select(&frames, &tracks), &cfg);
+        same_estimator(&want, &all.select(a, b, &tracks), 4);
+        for p in (0..t.n_tracks()).step_by(7) {
+            let mut mask = all.spans.mask(p);
+            for q in 0..t.n_tracks() {
+                let shared = all
+                    .frames_of(q)
+                    .iter()
+                    .filter(|f| all.frames_of(p).binary_search(f).is_ok())
+                    .count();
+                assert_eq!(all.spans.overlap(q, &mask), shared, "({p}, {q})");
+                for f in 0..t.n_frames() {
+                    assert_eq!(
+                        all.spans.has(q, f),
+                        all.frames_of(q).binary_search(&(f as u32)).is_ok()
+                    );
+                }
+            }
+            let q = (p + 1) % t.n_tracks();
+            all.spans.intersect(q, &mut mask);
+            let both = all
+                .frames_of(q)
+                .iter()
+                .filter(|f| all.frames_of(p).binary_search(f).is_ok())
+                .count();
+            assert_eq!(all.spans.overlap(p, &mask), both);
+        }
     }
 }

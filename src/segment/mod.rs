@@ -113,9 +113,11 @@
 //! `n ≤ 1500` tracks; step 6 one perspective fit per pair tested (at most `K(K−1)/2`, then
 //! `K` per merge), each linear in the pair's observations per adjustment iteration; step 7
 //! one track fit per grouped track (the groups' extents) and O(K k) per short track.
-//! Nothing is dense in F×N beyond what
-//! [`TrackSubspace`] itself holds. The O(N²) neighbour pre-selection dominates beyond
-//! ~10⁴ tracks (see the long-video issue for a spatial index).
+//! Nothing is dense in F×N: [`TrackSubspace`] holds the observations per track
+//! (`O(n_obs)`; [`segment_table`] reads a sparse table without the dense `W` that
+//! [`segment`]'s input is), the hypotheses' subspaces `O(F)` each. The O(N²) neighbour
+//! pre-selection dominates beyond ~10⁴ tracks in one segmentation; a long sequence of
+//! short tracks is segmented by windows ([`windows`]), each with the tracks it sees.
 
 use std::time::Instant;
 
@@ -715,11 +717,40 @@ pub fn segment<R: Rng + ?Sized>(
 ) -> Result<Segmentation> {
     cfg.validate()?;
     let t0 = Instant::now();
-    let ts = TrackSubspace::new(meas, &cfg.subspace);
-    if let Some(w) = windows::plan(&ts, cfg) {
-        return windows::segment_windows(meas, &ts, &w, cfg, rng, t0);
+    segment_estimator(&TrackSubspace::new(meas, &cfg.subspace), cfg, rng, t0)
+}
+
+/// [`segment`] of a sparse table's tracks, without its dense `2F × N` matrix: memory
+/// `O(n_obs)` beside what the segmentation itself holds (on a long sequence of short
+/// tracks, one window's at a time; see [`windows`]).
+///
+/// Errors: as [`segment`].
+pub fn segment_table<R: Rng + ?Sized>(
+    table: &crate::TrackTable,
+    cfg: &SegmentConfig,
+    rng: &mut R,
+) -> Result<Segmentation> {
+    cfg.validate()?;
+    let t0 = Instant::now();
+    segment_estimator(
+        &TrackSubspace::from_table(table, &cfg.subspace),
+        cfg,
+        rng,
+        t0,
+    )
+}
+
+/// [`segment`] of the tracks `ts` holds (`cfg` validated), whole or window by window.
+fn segment_estimator<R: Rng + ?Sized>(
+    ts: &TrackSubspace,
+    cfg: &SegmentConfig,
+    rng: &mut R,
+    t0: Instant,
+) -> Result<Segmentation> {
+    if let Some(w) = windows::plan(ts, cfg) {
+        return windows::segment_windows(ts, &w, cfg, rng, t0);
     }
-    segment_tracks(&ts, cfg, rng, t0, None)
+    segment_tracks(ts, cfg, rng, t0, None)
 }
 
 /// [`segment`] on the tracks `ts` holds (`cfg` already validated; `t0` starts the clock).

@@ -615,6 +615,21 @@ fn a_long_sequence_of_short_tracks_is_segmented_by_windows() {
         let seg = segment(&meas, &cfg, &mut StdRng::seed_from_u64(7)).unwrap();
         let sizes: Vec<usize> = seg.objects.iter().map(|o| o.tracks.len()).collect();
         assert_eq!(seg.count_rule, CountRule::Windows);
+        if seed == 1 {
+            // The sparse table, segmented without its dense W, gives the same segmentation
+            // to the last bit.
+            let sparse = segment_table(&scene.table, &cfg, &mut StdRng::seed_from_u64(7)).unwrap();
+            assert_eq!(sparse.labels, seg.labels);
+            assert_eq!(sparse.objects.len(), seg.objects.len());
+            for (a, b) in sparse.objects.iter().zip(&seg.objects) {
+                assert_eq!(a.tracks, b.tracks);
+                assert_eq!(a.model.defined, b.model.defined);
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a.model.m), bits(&b.model.m));
+                assert_eq!(bits(&a.model.t), bits(&b.model.t));
+                assert_eq!(a.rms.to_bits(), b.rms.to_bits());
+            }
+        }
         assert_eq!(
             seg.objects.len(),
             1 + objects.len(),

@@ -46,9 +46,11 @@
 //! table with the window's density, times `W/2`): linear in the frames at a fixed track
 //! length and density. Choosing each window's tracks `O(W · N log k)` (a binary search in
 //! every track's frames per window); links `O(Σ_k n_k)`; labels `O(n_obs)`; the stitching
-//! one ALS refit per object. Memory: one window's segmentation at a time, plus the labels of
-//! every window (about 2–3 per track), beside the dense `2F × N` estimator over all tracks
-//! that [`super::segment`] builds (for the windows' plan, the stitching and the scores).
+//! one ALS refit per object. Memory: one window's segmentation at a time (its estimator
+//! cut from the whole one's, [`TrackSubspace::select`]), plus the labels of every window
+//! (about 2–3 per track), beside the estimator over all tracks (for the windows' plan, the
+//! stitching and the scores), which holds the observations per track: `O(n_obs)` from a
+//! sparse table ([`super::segment_table`]), with no `2F × N` matrix.
 
 use std::time::Instant;
 
@@ -60,7 +62,7 @@ use super::{
     segment_tracks,
 };
 use crate::robust::subspace::{AffineSubspace, TrackSubspace};
-use crate::{Error, Measurements, Result};
+use crate::{Error, Result};
 
 /// Every track's `(ν_p r²_p, ν_p)` under one subspace (`None`: not scorable).
 type Chi = Vec<Option<(f64, f64)>>;
@@ -110,7 +112,6 @@ struct Piece {
 
 /// [`super::segment`] of a long sequence, window by window (see the module documentation).
 pub(super) fn segment_windows<R: Rng + ?Sized>(
-    meas: &Measurements,
     ts: &TrackSubspace,
     windows: &[(usize, usize)],
     cfg: &SegmentConfig,
@@ -124,7 +125,6 @@ pub(super) fn segment_windows<R: Rng + ?Sized>(
     let (mut energy, mut hypotheses, mut rounds, mut converged) = (0.0, 0, 0, true);
     let mut merge_tests = Vec::new();
     for &(a, b) in windows {
-        let frames: Vec<usize> = (a..b).collect();
         let tracks: Vec<usize> = (0..n)
             .filter(|&p| {
                 let fr = ts.frames_of(p);
@@ -133,8 +133,7 @@ pub(super) fn segment_windows<R: Rng + ?Sized>(
                 hi - lo >= 3
             })
             .collect();
-        let sub = meas.select(&frames, &tracks);
-        let wts = TrackSubspace::new(&sub, &cfg.subspace);
+        let wts = ts.select(a, b, &tracks);
         let seg = match segment_tracks(&wts, cfg, rng, Instant::now(), None) {
             Ok(s) => s,
             Err(Error::TooFew { .. }) | Err(Error::Degenerate(_)) => {
