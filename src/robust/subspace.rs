@@ -64,9 +64,9 @@
 //!
 //! Memory: the observations per track, 20 bytes an observed entry (16 on a complete
 //! table), read from a dense [`Measurements`] or a sparse [`crate::TrackTable`]
-//! ([`TrackSubspace::from_table`]) — no `2F × N` matrix — plus the usable frames' lists
-//! and bitsets: `O(#observations + N)`, shared by the estimators built from one another
-//! ([`TrackSubspace::with_exclusions_shared`]). A lookup of one entry by frame is
+//! ([`TrackSubspace::from_table`]) — no `2F × N` matrix — shared by the estimators built
+//! from one another ([`TrackSubspace::with_exclusions_shared`]), plus the usable frames'
+//! bitsets and, only where entries are excluded, their lists: `O(#observations + N)`. A lookup of one entry by frame is
 //! `O(log k)` (`O(1)` for a track seen in every frame); the fits walk a track's entries
 //! in order.
 
@@ -392,6 +392,16 @@ impl Columns {
     }
 }
 
+/// Track `p`'s usable frames: its own list when entries were excluded (`usable`), else its
+/// observed frames.
+#[inline]
+fn usable_frames<'a>(cols: &'a Columns, usable: Option<&'a [Vec<u32>]>, p: usize) -> &'a [u32] {
+    match usable {
+        Some(u) => &u[p],
+        None => cols.frames(p),
+    }
+}
+
 /// Track `p`'s usable entries `(frame, observation)` in frame order: its usable frames
 /// walked beside its observed ones (a subset of them, both sorted).
 struct Usable<'a> {
@@ -438,12 +448,12 @@ struct FrameMask {
 }
 
 impl Spans {
-    fn new(frames_of: &[Vec<u32>]) -> Self {
-        let n = frames_of.len();
+    /// The bitsets of `n` tracks whose usable frames are `frames_of(p)`.
+    fn new<'a>(n: usize, frames_of: impl Fn(usize) -> &'a [u32]) -> Self {
         let (mut lo, mut start) = (Vec::with_capacity(n), Vec::with_capacity(n + 1));
         start.push(0);
         let mut bits = Vec::new();
-        for fr in frames_of {
+        for fr in (0..n).map(frames_of) {
             let (first, last) = match (fr.first(), fr.last()) {
                 (Some(&a), Some(&b)) => (a as usize / 64, b as usize / 64 + 1),
                 _ => (0, 0),
@@ -513,8 +523,9 @@ pub struct TrackSubspace {
     /// Every observed entry per track, shared by the estimators built from one another
     /// ([`Self::with_exclusions_shared`], clones).
     cols: Arc<Columns>,
-    /// Usable frames (observed and not excluded) per track.
-    frames_of: Vec<Vec<u32>>,
+    /// Usable frames per track when entries were excluded; `None`: every observed entry
+    /// is usable, and a track's usable frames are its observed ones ([`Columns::frames`]).
+    usable: Option<Vec<Vec<u32>>>,
     /// Bitsets of the usable frames per track, over the words each track spans.
     spans: Spans,
     /// Tracks with at least `min_overlap` usable frames.
@@ -669,29 +680,29 @@ impl TrackSubspace {
             .map(|&(fr, p)| (p, fr as u32))
             .collect();
         by_track.sort_unstable();
-        let mut e = 0;
-        let frames_of: Vec<Vec<u32>> = (0..n)
-            .map(|p| {
-                let fr = cols.frames(p);
-                let b = e + by_track[e..].partition_point(|x| x.0 == p);
-                let ex = &by_track[e..b];
-                e = b;
-                if ex.is_empty() {
-                    return fr.to_vec();
-                }
-                fr.iter()
-                    .copied()
-                    .filter(|x| ex.binary_search(&(p, *x)).is_err())
-                    .collect()
-            })
-            .collect();
-        let spans = Spans::new(&frames_of);
+        let usable = (!by_track.is_empty()).then(|| {
+            let mut e = 0;
+            (0..n)
+                .map(|p| {
+                    let fr = cols.frames(p);
+                    let b = e + by_track[e..].partition_point(|x| x.0 == p);
+                    let ex = &by_track[e..b];
+                    e = b;
+                    fr.iter()
+                        .copied()
+                        .filter(|x| ex.binary_search(&(p, *x)).is_err())
+                        .collect::<Vec<u32>>()
+                })
+                .collect::<Vec<_>>()
+        });
+        let frames_of = |p: usize| usable_frames(&cols, usable.as_deref(), p);
+        let spans = Spans::new(n, frames_of);
         let min_overlap = cfg.min_overlap.clamp(2, f.max(2));
         let eligible: Vec<usize> = (0..n)
-            .filter(|&p| frames_of[p].len() >= min_overlap)
+            .filter(|&p| frames_of(p).len() >= min_overlap)
             .collect();
-        let complete = frames_of.iter().all(|v| v.len() == f);
-        let mut lens: Vec<f64> = frames_of.iter().map(|v| v.len() as f64).collect();
+        let complete = (0..n).all(|p| frames_of(p).len() == f);
+        let mut lens: Vec<f64> = (0..n).map(|p| frames_of(p).len() as f64).collect();
         let med = if lens.is_empty() {
             min_overlap as f64
         } else {
@@ -702,7 +713,7 @@ impl TrackSubspace {
             f,
             n,
             cols,
-            frames_of,
+            usable,
             spans,
             eligible,
             complete,
@@ -733,20 +744,21 @@ impl TrackSubspace {
     }
 
     /// Usable frames of track `p`.
+    #[inline]
     pub fn frames_of(&self, p: usize) -> &[u32] {
-        &self.frames_of[p]
+        usable_frames(&self.cols, self.usable.as_deref(), p)
     }
 
     /// Track `p`'s usable entries `(frame, observation)`, in frame order.
     #[inline]
     fn usable(&self, p: usize) -> Usable<'_> {
-        let frames = self.cols.frames(p);
+        let (frames, usable) = (self.cols.frames(p), self.frames_of(p));
         Usable {
-            usable: self.frames_of[p].iter(),
+            usable: usable.iter(),
             frames,
             xy: self.cols.xy(p),
             j: 0,
-            all: frames.len() == self.frames_of[p].len(),
+            all: frames.len() == usable.len(),
         }
     }
 
@@ -940,11 +952,11 @@ impl TrackSubspace {
     fn span_of(&self, tracks: &[usize]) -> (usize, usize) {
         let lo = tracks
             .iter()
-            .filter_map(|&p| self.frames_of[p].first())
+            .filter_map(|&p| self.frames_of(p).first())
             .min();
         let hi = tracks
             .iter()
-            .filter_map(|&p| self.frames_of[p].last())
+            .filter_map(|&p| self.frames_of(p).last())
             .max();
         match (lo, hi) {
             (Some(&lo), Some(&hi)) => (lo as usize, hi as usize + 1),
@@ -967,7 +979,7 @@ impl TrackSubspace {
         // Entry weights, aligned with frames_of of each inlier.
         let mut keep: Vec<Vec<bool>> = inliers
             .iter()
-            .map(|&p| vec![true; self.frames_of[p].len()])
+            .map(|&p| vec![true; self.frames_of(p).len()])
             .collect();
         let mut coords: Vec<Option<[f64; 3]>> = vec![None; inliers.len()];
         // The weights used by the last sweep's S- and M-steps.
@@ -983,7 +995,8 @@ impl TrackSubspace {
                 .with_min_len(64)
                 .map(|(&p, kp)| {
                     let used = |fr: u32, k: bool| k && model.defined[fr as usize];
-                    let count = self.frames_of[p]
+                    let count = self
+                        .frames_of(p)
                         .iter()
                         .zip(kp)
                         .filter(|(fr, k)| used(**fr, **k))
@@ -1111,7 +1124,7 @@ impl TrackSubspace {
                     || (vec![0usize; f], vec![0usize; f]),
                     |(mut scored, mut within), (ps, ds)| {
                         for (&p, d2s) in ps.iter().zip(ds) {
-                            for (&fr, &d2) in self.frames_of[p].iter().zip(d2s) {
+                            for (&fr, &d2) in self.frames_of(p).iter().zip(d2s) {
                                 if !d2.is_nan() {
                                     scored[fr as usize] += 1;
                                     within[fr as usize] += usize::from(d2 <= cut2 || cut2 == 0.0);
@@ -1138,7 +1151,7 @@ impl TrackSubspace {
                 .with_min_len(ALS_CHUNK)
                 .map(|(kp, (d2s, &p))| {
                     let mut c = 0.0;
-                    for ((k, &d2), &fr) in kp.iter_mut().zip(d2s).zip(&self.frames_of[p]) {
+                    for ((k, &d2), &fr) in kp.iter_mut().zip(d2s).zip(self.frames_of(p)) {
                         if !d2.is_nan() {
                             *k = d2 <= cut2 || cut2 == 0.0 || !cut_frame[fr as usize];
                             if *k {
@@ -1160,7 +1173,7 @@ impl TrackSubspace {
         }
         let mut excluded: Vec<(usize, usize)> = Vec::new();
         for (j, &p) in inliers.iter().enumerate() {
-            for (&fr, &k) in self.frames_of[p].iter().zip(&used[j]) {
+            for (&fr, &k) in self.frames_of(p).iter().zip(&used[j]) {
                 if !k && model.defined[fr as usize] {
                     excluded.push((fr as usize, p));
                 }
@@ -1221,7 +1234,8 @@ impl Estimator for TrackSubspace {
         let f = self.f;
         // The frames all four use, and the four tracks' observations there (a cursor in
         // each track's observed frames).
-        let shared: Vec<u32> = self.frames_of[sample[0]]
+        let shared: Vec<u32> = self
+            .frames_of(sample[0])
             .iter()
             .copied()
             .filter(|&fr| sample[1..].iter().all(|&p| self.spans.has(p, fr as usize)))
@@ -1273,7 +1287,7 @@ impl Estimator for TrackSubspace {
     /// The given tracks' residuals, in parallel over tracks when their frames are many
     /// enough to pay for it (as [`Self::residuals`]).
     fn residuals_of(&self, model: &AffineSubspace, items: &[usize]) -> Vec<Option<f64>> {
-        let frames: usize = items.iter().map(|&p| self.frames_of[p].len()).sum();
+        let frames: usize = items.iter().map(|&p| self.frames_of(p).len()).sum();
         if frames < 4096 {
             return items.iter().map(|&p| self.residual(model, p)).collect();
         }
