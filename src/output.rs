@@ -143,7 +143,8 @@ fn ply_bytes(rec: &Reconstruction, opts: PlyOptions<'_>) -> Vec<u8> {
 /// The perspective reconstruction of `rec` as a COLMAP sparse model ([`crate::colmap`]):
 /// one `SIMPLE_PINHOLE` camera (`SIMPLE_RADIAL` when `k₁ ≠ 0`) shared by every image, or
 /// one per image with per-frame focal lengths; one image per fitted frame, named by its
-/// frame id (white space replaced by `_`), with every observation of `table` in that frame
+/// frame id (white space replaced by `_`; [`colmap_model_with`] names them by their image
+/// files, so that COLMAP and OpenMVS find the pictures), with every observation of `table` in that frame
 /// as a keypoint; one 3D point per fitted track, its track the keypoints the fit used
 /// (entries the robust pass flagged stay keypoints without a 3D point), its error the
 /// track's reprojection RMS. Pixel coordinates are shifted by
@@ -153,6 +154,28 @@ fn ply_bytes(rec: &Reconstruction, opts: PlyOptions<'_>) -> Vec<u8> {
 pub fn colmap_model(
     rec: &Reconstruction,
     table: &crate::TrackTable,
+) -> Option<crate::colmap::ColmapModel> {
+    colmap_model_with(rec, table, &ColmapExtras::default())
+}
+
+/// What the frames add to a COLMAP model ([`colmap_model_with`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ColmapExtras<'a> {
+    /// One per frame of the table: the frame's image file, relative to the folder COLMAP is
+    /// given as `--image_path`, so that COLMAP's `image_undistorter` and OpenMVS's
+    /// `InterfaceCOLMAP` find the pictures. A frame without one (`None`, or no list) is named
+    /// by its frame id.
+    pub image_names: Option<&'a [Option<String>]>,
+    /// The tracks' colours (the same as `points.ply`'s); a track without one is grey (128).
+    pub colors: Option<&'a std::collections::HashMap<crate::Id, [u8; 3]>>,
+}
+
+/// [`colmap_model`] with the images named by their files and the points coloured
+/// ([`ColmapExtras`]).
+pub fn colmap_model_with(
+    rec: &Reconstruction,
+    table: &crate::TrackTable,
+    extras: &ColmapExtras<'_>,
 ) -> Option<crate::colmap::ColmapModel> {
     use crate::colmap::{
         ColmapCamera, ColmapCameraModel, ColmapImage, ColmapModel, ColmapPoint,
@@ -240,7 +263,10 @@ pub fn colmap_model(
             ColmapPoint {
                 id: k as u64 + 1,
                 xyz: [x[0], x[1], x[2]],
-                rgb: [128, 128, 128],
+                rgb: extras
+                    .colors
+                    .and_then(|c| c.get(&table.track_ids()[p]).copied())
+                    .unwrap_or([128, 128, 128]),
                 error: if err.is_finite() { err } else { -1.0 },
                 track: Vec::new(),
             }
@@ -249,17 +275,20 @@ pub fn colmap_model(
     let mut images = Vec::with_capacity(nf);
     for (k, &f) in rec.kept_frames.iter().enumerate() {
         let id = k as u32 + 1;
-        let mut points2d = Vec::new();
-        for p in 0..table.n_tracks() {
-            let Some(q) = table.get(f, p) else { continue };
+        let row = table.frame_row(f).entries();
+        let mut points2d = Vec::with_capacity(row.len());
+        for e in row {
+            let p = e.track as usize;
             let pid = point_of[p].filter(|_| !flagged.contains(&(f, p)));
             if let Some(pid) = pid {
                 points[pid as usize - 1].track.push((id, points2d.len()));
             }
-            points2d.push(([q[0] + OFF, q[1] + OFF], pid));
+            points2d.push(([e.x + OFF, e.y + OFF], pid));
         }
-        let name: String = table.frame_ids()[f]
-            .to_string()
+        let name: String = extras
+            .image_names
+            .and_then(|n| n.get(f).cloned().flatten())
+            .unwrap_or_else(|| table.frame_ids()[f].to_string())
             .chars()
             .map(|c| if c.is_whitespace() { '_' } else { c })
             .collect();
@@ -292,7 +321,17 @@ pub fn colmap_model(
 /// Writes [`colmap_model`] into `dir` (cameras.txt, images.txt, points3D.txt); returns
 /// whether there was a perspective result to write.
 pub fn write_colmap(rec: &Reconstruction, table: &crate::TrackTable, dir: &Path) -> Result<bool> {
-    match colmap_model(rec, table) {
+    write_colmap_with(rec, table, &ColmapExtras::default(), dir)
+}
+
+/// [`write_colmap`] with what the frames add ([`ColmapExtras`]).
+pub fn write_colmap_with(
+    rec: &Reconstruction,
+    table: &crate::TrackTable,
+    extras: &ColmapExtras<'_>,
+    dir: &Path,
+) -> Result<bool> {
+    match colmap_model_with(rec, table, extras) {
         Some(model) => model.write_text(dir).map(|_| true),
         None => Ok(false),
     }

@@ -1,6 +1,7 @@
 //! The `rank3` binary end to end: synth → reconstruct → output files, and bad input.
 
 use std::path::{Path, PathBuf};
+use std::process::Command;
 
 mod common;
 use common::{bin, run_err, run_ok};
@@ -492,6 +493,101 @@ fn run_on_rendered_corner_recovers_structure() {
         );
     }
     assert!((angle - 90.0).abs() < 3.0, "angle between faces {angle}°");
+}
+
+/// `rank3 run --camera perspective` on a folder of images names each image of its COLMAP model
+/// by its file, so that COLMAP (`--image_path` = the folder) and OpenMVS find the pictures:
+/// every name in `colmap/images.txt` is a file of the folder, once each (the frame ids, the
+/// files' stems, were written before and COLMAP's `image_undistorter` read no image), and
+/// its points have the frames' colours. Where COLMAP is installed (CI installs it), its
+/// `model_analyzer` reads the model and its `image_undistorter` finds every image.
+#[test]
+fn run_names_the_colmap_images_by_their_files() {
+    let frames = 10;
+    let scene = Corner::new(frames);
+    let d = tmp("run-colmap-names");
+    let imgs = d.join("frames");
+    std::fs::create_dir_all(&imgs).unwrap();
+    for k in 0..frames {
+        scene
+            .render(k)
+            .save_png(&imgs.join(format!("{k:03}.png")))
+            .unwrap();
+    }
+    let out = d.join("out");
+    let log = run_ok(bin().arg("run").arg(&imgs).arg("--out").arg(&out).args([
+        "--max-features",
+        "200",
+        "--camera",
+        "perspective",
+    ]));
+    assert!(log.contains("images named by their files"), "{log}");
+    let text = std::fs::read_to_string(out.join("colmap").join("images.txt")).unwrap();
+    // Image lines: `IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME`, each followed by its
+    // keypoints' line.
+    let names: Vec<&str> = text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .step_by(2)
+        .map(|l| l.split_whitespace().nth(9).expect("a NAME"))
+        .collect();
+    assert_eq!(names.len(), frames, "{text}");
+    let distinct: std::collections::HashSet<&str> = names.iter().copied().collect();
+    assert_eq!(distinct.len(), frames);
+    for n in names {
+        assert!(
+            n.ends_with(".png") && imgs.join(n).is_file(),
+            "{n} is not a frame file"
+        );
+    }
+    // The points have the frames' colours (`POINT3D_ID X Y Z R G B ERROR TRACK[]`), as in
+    // points.ply: not all the grey of a model without frames.
+    let points = std::fs::read_to_string(out.join("colmap").join("points3D.txt")).unwrap();
+    let colours: std::collections::HashSet<Vec<&str>> = points
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split_whitespace().skip(4).take(3).collect())
+        .collect();
+    assert!(colours.len() > 5, "{} distinct colours", colours.len());
+
+    // COLMAP's own reader and its undistorter, the step before dense stereo (and what
+    // OpenMVS's `InterfaceCOLMAP` reads), find every image.
+    let colmap = std::env::var("RANK3_COLMAP").unwrap_or_else(|_| "colmap".into());
+    let analyzer = Command::new(&colmap)
+        .args(["model_analyzer", "--path"])
+        .arg(out.join("colmap"))
+        .output();
+    let Ok(analyzer) = analyzer else {
+        eprintln!(
+            "SKIPPED: `{colmap}` not found (apt-get install colmap, or set RANK3_COLMAP): \
+             COLMAP's own reader was not run"
+        );
+        return;
+    };
+    let log = String::from_utf8_lossy(&analyzer.stdout).into_owned()
+        + &String::from_utf8_lossy(&analyzer.stderr);
+    assert!(analyzer.status.success(), "{log}");
+    let points_written = points.lines().filter(|l| !l.starts_with('#')).count();
+    assert!(
+        log.contains(&format!("Registered images: {frames}")),
+        "{log}"
+    );
+    assert!(log.contains(&format!("Points: {points_written}")), "{log}");
+    let dense = d.join("dense");
+    let undistorter = Command::new(&colmap)
+        .args(["image_undistorter", "--image_path"])
+        .arg(&imgs)
+        .arg("--input_path")
+        .arg(out.join("colmap"))
+        .arg("--output_path")
+        .arg(&dense)
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&undistorter.stderr);
+    assert!(undistorter.status.success(), "{log}");
+    assert!(!log.contains("Cannot read image"), "{log}");
+    let undistorted = std::fs::read_dir(dense.join("images")).unwrap().count();
+    assert_eq!(undistorted, frames, "{log}");
 }
 
 /// `synth --camera perspective` then `reconstruct --camera projective`: the JSON holds a

@@ -108,7 +108,7 @@ pub fn write_outputs(
             rank3::recording::log_mesh(r, &rec, m)?;
         }
     }
-    write_colmap(&rec, table, out)?;
+    write_colmap(&rec, table, frames.map(|(p, _)| p), colors.as_ref(), out)?;
     let write_seconds = write_start.elapsed().as_secs_f64();
     print_summary(&rec, out);
     let mut files: Vec<&Path> = vec![&written.json];
@@ -193,15 +193,50 @@ pub fn show_perspective_layout(
     Ok(())
 }
 
-/// With a perspective result, the COLMAP text model in `OUT/colmap/`.
+/// With a perspective result, the COLMAP text model in `OUT/colmap/`. When the tracks came
+/// from a folder of images (`frames`), each image is named by its file, so that COLMAP
+/// (`--image_path` = that folder) and OpenMVS find the pictures; a video's frames keep their
+/// ids. Its points have the colours of `points.ply` when the frames gave them.
 fn write_colmap(
     rec: &Reconstruction,
     table: &rank3::TrackTable,
+    frames: Option<&Path>,
+    colors: Option<&std::collections::HashMap<rank3::Id, [u8; 3]>>,
     out: &Path,
 ) -> Result<(), rank3::Error> {
+    if rec.perspective.is_none() {
+        return Ok(());
+    }
+    let names: Option<Vec<Option<String>>> = match frames {
+        Some(p) if p.is_dir() => {
+            rank3::tracking::FrameSource::images(p)?
+                .image_files()
+                .map(|files| {
+                    let by_id: std::collections::HashMap<rank3::Id, String> =
+                        files.into_iter().collect();
+                    table
+                        .frame_ids()
+                        .iter()
+                        .map(|id| by_id.get(id).cloned())
+                        .collect()
+                })
+        }
+        _ => None,
+    };
     let dir = out.join("colmap");
-    if rank3::output::write_colmap(rec, table, &dir)? {
-        info!("wrote COLMAP model {}", dir.display());
+    let extras = rank3::output::ColmapExtras {
+        image_names: names.as_deref(),
+        colors,
+    };
+    if rank3::output::write_colmap_with(rec, table, &extras, &dir)? {
+        match frames {
+            Some(p) if names.is_some() => info!(
+                "wrote COLMAP model {} (images named by their files in {})",
+                dir.display(),
+                p.display()
+            ),
+            _ => info!("wrote COLMAP model {}", dir.display()),
+        }
     }
     Ok(())
 }

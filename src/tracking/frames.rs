@@ -316,6 +316,27 @@ impl FrameSource {
         }
     }
 
+    /// A folder source's images as `(frame id, file name)` in the order they are read (the
+    /// ids [`FrameSource::next_frame`] gives them); `None` for a video, whose frames have no
+    /// files.
+    pub fn image_files(&self) -> Option<Vec<(Id, String)>> {
+        match self {
+            FrameSource::Images { files, .. } => Some(
+                files
+                    .iter()
+                    .map(|f| {
+                        let name = f
+                            .file_name()
+                            .map(|s| s.to_string_lossy().into_owned())
+                            .unwrap_or_default();
+                        (frame_id(f), name)
+                    })
+                    .collect(),
+            ),
+            FrameSource::Video(_) => None,
+        }
+    }
+
     /// The input path.
     pub fn path(&self) -> &Path {
         match self {
