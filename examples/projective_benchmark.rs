@@ -6,9 +6,11 @@
 //! `cargo run --release --example projective_benchmark -- [K] [FIRST_SEED] [VARIANT ...]`
 //!
 //! K random starts per row (default 100), seeds FIRST_SEED.. (default 0). Variants (default
-//! `pose0.01 direct`; `pose0.01` is the library's default chain):
+//! `pose0.01+pose0.1 pose0.01 direct`; `pose0.01+pose0.1` is the library's default):
 //! * `poseETA`: affine → pOSE (weight ETA on the affine term, VarPro) → projective VarPro;
 //! * `direct`: affine → projective VarPro;
+//! * `A+B` (each `poseETA` or `direct`): both chains from the same affine optimum, the one
+//!   of lower final cost kept (`ProjectiveConfig::second_bridge`);
 //! * `poseETA-joint` / `direct-joint`: the same with a joint (Schur, damped points, no
 //!   point re-solve) projective Levenberg–Marquardt instead of VarPro.
 //!
@@ -46,13 +48,22 @@ fn variant(name: &str) -> Option<ProjectiveConfig> {
         Some(b) => (b, true),
         None => (name, false),
     };
-    cfg.bridge = if base == "direct" {
-        Bridge::Direct
-    } else {
-        Bridge::Pose {
-            eta: base.strip_prefix("pose")?.parse().ok()?,
-        }
+    let bridge = |b: &str| -> Option<Bridge> {
+        Some(if b == "direct" {
+            Bridge::Direct
+        } else {
+            Bridge::Pose {
+                eta: b.strip_prefix("pose")?.parse().ok()?,
+            }
+        })
     };
+    // `A+B`: two chains from each start, the lower kept; `A` alone: one chain.
+    let (first, second) = match base.split_once('+') {
+        Some((a, b)) => (bridge(a)?, Some(bridge(b)?)),
+        None => (bridge(base)?, None),
+    };
+    cfg.bridge = first;
+    cfg.second_bridge = second;
     if joint {
         cfg.refine.damp_points = true;
         cfg.refine.resolve_points = false;
@@ -68,7 +79,11 @@ fn main() {
     let first_seed: u64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(0);
     let mut variants: Vec<String> = args.iter().skip(3).cloned().collect();
     if variants.is_empty() {
-        variants = vec!["pose0.01".into(), "direct".into()];
+        variants = vec![
+            "pose0.01+pose0.1".into(),
+            "pose0.01".into(),
+            "direct".into(),
+        ];
     }
     let dir = rank3::datasets::dir();
     let mut cases: Vec<(String, std::path::PathBuf, f64)> = vec![

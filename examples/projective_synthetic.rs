@@ -408,8 +408,10 @@ fn bridge_table(seeds: std::ops::Range<u64>) {
             noise: 1.0,
         };
         for (name, bridge) in bridges {
+            // Each bridge alone (one chain), to compare them.
             let cfg = ProjectiveConfig {
                 bridge,
+                second_bridge: None,
                 ..Default::default()
             };
             let runs = over_seeds(cell, seeds.clone(), name, &mut errors, |s, t| {

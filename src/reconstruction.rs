@@ -340,6 +340,10 @@ pub struct ProjectiveResult {
     /// Non-zeros of the reduced camera system (lower triangle) of the bundle adjustment; 0
     /// when it was solved by conjugate gradients and never formed.
     pub schur_nnz: usize,
+    /// The chains tried from the affine start when a second bridge ran
+    /// ([`projective::ProjectiveConfig::second_bridge`]): bridge, final RMS, which was kept.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub bridges: Vec<projective::BridgeOutcome>,
     /// The fitted model (fit frames × fit tracks), for library users.
     #[serde(skip)]
     pub model: projective::ProjectiveModel,
@@ -419,6 +423,7 @@ impl ProjectiveResult {
             cameras,
             points: points.into_iter().map(|(_, p)| p).collect(),
             schur_nnz: pf.schur_nnz,
+            bridges: pf.bridges,
             model,
             outlier_points,
         }
@@ -491,6 +496,7 @@ impl ProjectiveResult {
             cameras,
             points,
             schur_nnz: pf.schur_nnz,
+            bridges: pf.bridges,
             model,
             outlier_points,
         }
@@ -2409,6 +2415,8 @@ fn fit_selection(
         // fit's cameras.
         let mut pcfg = config.projective.clone();
         if config.camera.is_perspective() {
+            // Only a start for the perspective stages: one chain.
+            pcfg.second_bridge = None;
             let cap = if warm.is_some() {
                 config.perspective.projective_refit_iterations
             } else {
@@ -2547,6 +2555,8 @@ fn part_pretest(
         t: &c.t,
     };
     let mut pcfg = config.projective.clone();
+    // The pre-test only compares costs: one chain.
+    pcfg.second_bridge = None;
     pcfg.refine.noise_tolerance = pcfg.refine.noise_tolerance.max(PRETEST_CHI2_PRECISION);
     pcfg.refine.noise_window = pcfg.refine.noise_window.min(PRETEST_WINDOW);
     let pf = projective::fit(meas, start, &pcfg, 0, &mut crate::NoopObserver).ok()?;

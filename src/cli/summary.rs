@@ -289,6 +289,28 @@ pub fn print_report(rec: &Reconstruction) {
                 s.seconds
             );
         }
+        if !p.bridges.is_empty() {
+            let name = |b: &rank3::projective::Bridge| match b {
+                rank3::projective::Bridge::Direct => "direct".to_string(),
+                rank3::projective::Bridge::Pose { eta } => format!("pOSE η = {eta}"),
+            };
+            info!(
+                "projective chains from the affine start: {} (the lower kept; the stages above \
+                 are the kept one's)",
+                p.bridges
+                    .iter()
+                    .map(|b| format!(
+                        "{} → {:.6} px ({} iterations, {:.3} s){}",
+                        name(&b.bridge),
+                        b.rms_px,
+                        b.iterations,
+                        b.seconds,
+                        if b.kept { " ←" } else { "" }
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
     }
     if let Some(p) = &rec.perspective
         && let Some(sc) = &p.self_calibration

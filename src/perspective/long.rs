@@ -536,6 +536,7 @@ fn fit_window(
             max_iterations: cfg.projective_iterations,
             ..projective_cfg.refine.clone()
         },
+        second_bridge: None,
         ..projective_cfg.clone()
     };
     let proj = projective::fit(

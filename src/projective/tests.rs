@@ -99,6 +99,54 @@ fn noise_free_missing_scene_is_fitted_exactly() {
     assert!(fit.rms_px < 1e-9, "rms {}", fit.rms_px);
 }
 
+/// With a second bridge, `fit` runs both chains from the same affine start and keeps the one
+/// of lower final cost: each chain's reported RMS is that of the same bridge run alone (one
+/// chain, bit for bit), the kept one is the lower and is what `fit` returns.
+#[test]
+fn the_chain_of_lower_cost_is_kept_from_two_bridges() {
+    let (mut meas, _, _) = scene(16, 80, 2.5, 0.5, 5);
+    let mut rng = StdRng::seed_from_u64(9);
+    for v in meas.w.col_iter_mut() {
+        for x in v.iter_mut() {
+            *x += rng.random_range(-1.0..1.0);
+        }
+    }
+    let both = ProjectiveConfig {
+        sturm_triggs: false,
+        bridge: Bridge::Pose { eta: 0.01 },
+        second_bridge: Some(Bridge::Direct),
+        ..ProjectiveConfig::default()
+    };
+    let two = run(&meas, &both);
+    assert_eq!(two.bridges.len(), 2);
+    assert_eq!(two.bridges[0].bridge, both.bridge);
+    assert_eq!(two.bridges.iter().filter(|b| b.kept).count(), 1);
+    for b in &two.bridges {
+        let alone = run(
+            &meas,
+            &ProjectiveConfig {
+                bridge: b.bridge,
+                second_bridge: None,
+                ..both.clone()
+            },
+        );
+        assert!(alone.bridges.is_empty());
+        assert_eq!(alone.rms_px.to_bits(), b.rms_px.to_bits(), "{:?}", b.bridge);
+        if b.kept {
+            assert_eq!(two.rms_px.to_bits(), b.rms_px.to_bits());
+            assert_eq!(two.model, alone.model);
+        }
+    }
+    let lowest = two
+        .bridges
+        .iter()
+        .map(|b| b.rms_px)
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(two.rms_px, lowest);
+    // Noise of 1 px (uniform, σ ≈ 0.58 px): both chains reach the noise level.
+    assert!(two.rms_px < 0.6, "rms {}", two.rms_px);
+}
+
 /// `check_observations` counts per frame and per track in one walk: the first non-finite
 /// value in frame-major order is named, then too few tracks in a frame or frames of a track.
 #[test]

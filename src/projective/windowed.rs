@@ -820,6 +820,11 @@ pub(crate) fn fit_window(
     pcfg: &super::ProjectiveConfig,
 ) -> Result<super::ProjectiveFit> {
     let c = complete_window(start, end, tracks, meas, cfg, None)?;
+    // One chain per window (the second bridge would double the windows' cost).
+    let pcfg = super::ProjectiveConfig {
+        second_bridge: None,
+        ..pcfg.clone()
+    };
     super::fit(
         meas,
         super::AffineStart {
@@ -827,7 +832,7 @@ pub(crate) fn fit_window(
             s: c.s.as_ref(),
             t: &c.t,
         },
-        pcfg,
+        &pcfg,
         0,
         &mut NoopObserver,
     )
