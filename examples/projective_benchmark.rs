@@ -208,8 +208,8 @@ fn main() {
                         r.stages
                             .iter()
                             .map(|s| format!(
-                                "{} {:?} {} it {:.6}",
-                                s.stage, s.status, s.iterations, s.rms_after_px
+                                "{} {:?} {} it {:.6} {:.6}",
+                                s.stage, s.status, s.iterations, s.rms_before_px, s.rms_after_px
                             ))
                             .collect::<Vec<_>>()
                     );

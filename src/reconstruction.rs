@@ -340,8 +340,9 @@ pub struct ProjectiveResult {
     /// Non-zeros of the reduced camera system (lower triangle) of the bundle adjustment; 0
     /// when it was solved by conjugate gradients and never formed.
     pub schur_nnz: usize,
-    /// The chains tried from the affine start when a second bridge ran
-    /// ([`projective::ProjectiveConfig::second_bridge`]): bridge, final RMS, which was kept.
+    /// The bridges tried from the affine start when a second one ran
+    /// ([`projective::ProjectiveConfig::second_bridge`]): bridge, the projective RMS where
+    /// it ended, which one the adjustment started from.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub bridges: Vec<projective::BridgeOutcome>,
     /// The fitted model (fit frames × fit tracks), for library users.

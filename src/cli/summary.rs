@@ -295,14 +295,14 @@ pub fn print_report(rec: &Reconstruction) {
                 rank3::projective::Bridge::Pose { eta } => format!("pOSE η = {eta}"),
             };
             info!(
-                "projective chains from the affine start: {} (the lower kept; the stages above \
-                 are the kept one's)",
+                "projective bridges from the affine start: {} (the adjustment started from the \
+                 lower; the stages above are its)",
                 p.bridges
                     .iter()
                     .map(|b| format!(
-                        "{} → {:.6} px ({} iterations, {:.3} s){}",
+                        "{} → RMS {:.6} px ({} iterations, {:.3} s){}",
                         name(&b.bridge),
-                        b.rms_px,
+                        b.start_rms_px,
                         b.iterations,
                         b.seconds,
                         if b.kept { " ←" } else { "" }

@@ -110,16 +110,16 @@ pub struct ProjectiveConfig {
     /// 96/100 against 0/100), and no real matrix loses. The one set that prefers 0.1 is the
     /// open sphere seen from closest (27/30 against 20/30).
     pub bridge: Bridge,
-    /// A second chain from the same affine start: this bridge and its own projective bundle
-    /// adjustment, the chain of lower final cost kept (both reported in
+    /// A second bridge from the same affine start: both are run, and the projective bundle
+    /// adjustment starts from the end whose projective cost is lower (both reported in
     /// [`ProjectiveFit::bridges`]). Default [`Bridge::Pose`] with `eta = 0.1`: the two
-    /// weights fail on different starts — of 30 random starts on the open sphere seen from
-    /// closest (Hong et al.'s S10.5) `eta = 0.01` reached the optimum from 20 and `0.1` from
-    /// 27, together from 27; on the loop-closed sphere 30 and 16, together 30; on the
-    /// strong-perspective dinosaur 30 and 0, together 30 (docs/results.md). It costs a
-    /// second bridge and adjustment. `None`: one chain. Not used with the Sturm–Triggs start
-    /// (no bridge) nor by the windows of long sequences or the automatic camera's pre-test,
-    /// which take one chain.
+    /// weights fail on different starts — over 30 random starts on the open sphere seen
+    /// from closest (Hong et al.'s S10.5) `eta = 0.01` alone reached the optimum from 20
+    /// and `0.1` alone from 27, picking the lower end from 26; on the loop-closed sphere 30,
+    /// 16 and 30; on the strong-perspective dinosaur 30, 0 and 30 (docs/results.md). It
+    /// costs a second bridge, not a second adjustment. `None`: one bridge. Not used with
+    /// the Sturm–Triggs start (no bridge) nor by the windows of long sequences, the
+    /// automatic camera's pre-test and the perspective camera's projective start.
     #[serde(default = "default_second_bridge")]
     pub second_bridge: Option<Bridge>,
     /// Use the Sturm–Triggs start when the table is complete. Default true.
@@ -341,22 +341,22 @@ pub struct ProjectiveFit {
     /// Non-zeros of the reduced camera system's lower triangle (0: solved by conjugate
     /// gradients, never formed).
     pub schur_nnz: usize,
-    /// With [`ProjectiveConfig::second_bridge`], each chain tried from the affine start
-    /// (the configured bridge first); empty when one chain ran.
+    /// With [`ProjectiveConfig::second_bridge`], each bridge tried from the affine start
+    /// (the configured one first); empty when one ran.
     pub bridges: Vec<BridgeOutcome>,
 }
 
-/// One chain (bridge, then projective bundle adjustment) tried from the affine start.
+/// One bridge tried from the affine start ([`ProjectiveConfig::second_bridge`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BridgeOutcome {
     pub bridge: Bridge,
-    /// Final reprojection RMS of the chain over the observed scalars, pixels (NaN when
-    /// it failed).
-    pub rms_px: f64,
-    /// Iterations of its bridge and adjustment.
+    /// Reprojection RMS of the projective model where the bridge ended (the adjustment's
+    /// start), over the observed scalars, pixels (NaN when the bridge failed).
+    pub start_rms_px: f64,
+    /// Iterations of the bridge (0 for [`Bridge::Direct`]).
     pub iterations: usize,
     pub seconds: f64,
-    /// Whether its result is the one returned (the lower final cost).
+    /// Whether the adjustment started from its end (the lower cost).
     pub kept: bool,
 }
 
@@ -607,37 +607,50 @@ pub fn fit(
                 observer,
             );
         };
-        // Two chains from the same start; the second is reported as run `run + 1`.
-        let mut chain = |b: Bridge, c: Vec<f64>, x: Vec<f64>, r: usize| {
+        // Both bridges from the same start (the second reported as run `run + 1`); the
+        // adjustment starts from the end of lower projective cost.
+        let mut ends = Vec::with_capacity(2);
+        for (b, r) in [(cfg.bridge, run), (second, run + 1)] {
             let t0 = Instant::now();
             let mut st = Vec::new();
-            let out = bridge(&g, px, c, x, b, cfg, r, observer, &mut st).and_then(|(cams, pts)| {
-                bundle_adjust(&g, &norm, cams, pts, Start::Affine, st, cfg, r, observer)
+            let out = bridge(&g, px, c.clone(), x.clone(), b, cfg, r, observer, &mut st);
+            let cost = out.as_ref().map_or(f64::NAN, |(cams, pts)| {
+                bundle::cost(&models::Projective, &g, cams, pts, &[])
             });
             let outcome = BridgeOutcome {
                 bridge: b,
-                rms_px: out.as_ref().map_or(f64::NAN, |f| f.rms_px),
-                iterations: out
-                    .as_ref()
-                    .map_or(0, |f| f.stages.iter().map(|s| s.iterations).sum()),
+                start_rms_px: (cost / n_scalars).sqrt() * px,
+                iterations: st.iter().map(|s| s.iterations).sum(),
                 seconds: t0.elapsed().as_secs_f64(),
                 kept: false,
             };
-            (out, outcome)
+            ends.push((out, st, outcome));
+        }
+        // The lower cost; a bridge that failed or ended at a non-finite cost loses (both:
+        // the first's error).
+        let second_wins = {
+            let (a, b) = (ends[0].2.start_rms_px, ends[1].2.start_rms_px);
+            b.is_finite() && !(a <= b)
         };
-        let (first, mut o1) = chain(cfg.bridge, c.clone(), x.clone(), run);
-        let (other, mut o2) = chain(second, c, x, run + 1);
-        // The lower final cost; a chain that failed loses (both failing: the first's error).
-        let second_wins = match (&first, &other) {
-            (Ok(a), Ok(b)) => b.rms_px < a.rms_px || !a.rms_px.is_finite(),
-            (Err(_), Ok(_)) => true,
-            _ => false,
-        };
-        let mut kept = if second_wins { other? } else { first? };
-        o1.kept = !second_wins;
-        o2.kept = second_wins;
-        kept.bridges = vec![o1, o2];
-        return Ok(kept);
+        let k = usize::from(second_wins);
+        ends[k].2.kept = true;
+        let bridges: Vec<BridgeOutcome> = ends.iter().map(|e| e.2.clone()).collect();
+        let (out, st, _) = ends.swap_remove(k);
+        stages.extend(st);
+        let (cams, pts) = out?;
+        let mut fit = bundle_adjust(
+            &g,
+            &norm,
+            cams,
+            pts,
+            Start::Affine,
+            stages,
+            cfg,
+            run + k,
+            observer,
+        )?;
+        fit.bridges = bridges;
+        return Ok(fit);
     };
 
     bundle_adjust(&g, &norm, cams, pts, start, stages, cfg, run, observer)
