@@ -357,15 +357,11 @@ fn fit_plane(pts: &[nalgebra::Vector3<f64>]) -> (nalgebra::Vector3<f64>, f64) {
     )
 }
 
-/// `rank3 run` end to end on frames rendered from a rigid 3D scene with known structure:
-/// tracks, metric reconstruction, and the recovered structure checked against the truth
-/// (up to the similarity and mirror ambiguity of orthographic cameras) and through the
-/// angle between the two faces, 90° in the scene.
-#[test]
-fn run_on_rendered_corner_recovers_structure() {
-    let frames = 10;
+/// The corner scene's `frames` frames rendered as `DIR/frames/000.png`, …, in a fresh test
+/// folder `DIR` named `name`: the scene, `DIR` and the frames' folder.
+fn rendered_corner(name: &str, frames: usize) -> (Corner, PathBuf, PathBuf) {
     let scene = Corner::new(frames);
-    let d = tmp("run-corner");
+    let d = tmp(name);
     let imgs = d.join("frames");
     std::fs::create_dir_all(&imgs).unwrap();
     for k in 0..frames {
@@ -374,6 +370,17 @@ fn run_on_rendered_corner_recovers_structure() {
             .save_png(&imgs.join(format!("{k:03}.png")))
             .unwrap();
     }
+    (scene, d, imgs)
+}
+
+/// `rank3 run` end to end on frames rendered from a rigid 3D scene with known structure:
+/// tracks, metric reconstruction, and the recovered structure checked against the truth
+/// (up to the similarity and mirror ambiguity of orthographic cameras) and through the
+/// angle between the two faces, 90° in the scene.
+#[test]
+fn run_on_rendered_corner_recovers_structure() {
+    let frames = 10;
+    let (scene, d, imgs) = rendered_corner("run-corner", frames);
     let out = d.join("out");
     run_ok(bin().arg("run").arg(&imgs).arg("--out").arg(&out).args([
         "--max-features",
@@ -504,16 +511,7 @@ fn run_on_rendered_corner_recovers_structure() {
 #[test]
 fn run_names_the_colmap_images_by_their_files() {
     let frames = 10;
-    let scene = Corner::new(frames);
-    let d = tmp("run-colmap-names");
-    let imgs = d.join("frames");
-    std::fs::create_dir_all(&imgs).unwrap();
-    for k in 0..frames {
-        scene
-            .render(k)
-            .save_png(&imgs.join(format!("{k:03}.png")))
-            .unwrap();
-    }
+    let (_, d, imgs) = rendered_corner("run-colmap-names", frames);
     let out = d.join("out");
     let log = run_ok(bin().arg("run").arg(&imgs).arg("--out").arg(&out).args([
         "--max-features",

@@ -592,68 +592,93 @@ pub fn fit(
         (c, x, Start::SturmTriggs)
     } else {
         let (c, x) = affine_start(&affine, &norm);
-        let second = cfg.second_bridge.filter(|b| *b != cfg.bridge);
-        let Some(second) = second else {
-            let (cams, pts) = bridge(&g, px, c, x, cfg.bridge, cfg, run, observer, &mut stages)?;
-            return bundle_adjust(
-                &g,
-                &norm,
-                cams,
-                pts,
-                Start::Affine,
-                stages,
-                cfg,
-                run,
-                observer,
-            );
-        };
-        // Both bridges from the same start (the second reported as run `run + 1`); the
-        // adjustment starts from the end of lower projective cost.
-        let mut ends = Vec::with_capacity(2);
-        for (b, r) in [(cfg.bridge, run), (second, run + 1)] {
-            let t0 = Instant::now();
-            let mut st = Vec::new();
-            let out = bridge(&g, px, c.clone(), x.clone(), b, cfg, r, observer, &mut st);
-            let cost = out.as_ref().map_or(f64::NAN, |(cams, pts)| {
-                bundle::cost(&models::Projective, &g, cams, pts, &[])
-            });
-            let outcome = BridgeOutcome {
-                bridge: b,
-                start_rms_px: (cost / n_scalars).sqrt() * px,
-                iterations: st.iter().map(|s| s.iterations).sum(),
-                seconds: t0.elapsed().as_secs_f64(),
-                kept: false,
-            };
-            ends.push((out, st, outcome));
-        }
-        // The lower cost; a bridge that failed or ended at a non-finite cost loses (both:
-        // the first's error).
-        let second_wins = {
-            let (a, b) = (ends[0].2.start_rms_px, ends[1].2.start_rms_px);
-            b.is_finite() && !(a <= b)
-        };
-        let k = usize::from(second_wins);
-        ends[k].2.kept = true;
-        let bridges: Vec<BridgeOutcome> = ends.iter().map(|e| e.2.clone()).collect();
-        let (out, st, _) = ends.swap_remove(k);
-        stages.extend(st);
-        let (cams, pts) = out?;
+        let end = bridges(&g, px, n_scalars, c, x, cfg, run, observer, &mut stages)?;
         let mut fit = bundle_adjust(
             &g,
             &norm,
-            cams,
-            pts,
+            end.cams,
+            end.pts,
             Start::Affine,
             stages,
             cfg,
-            run + k,
+            end.run,
             observer,
         )?;
-        fit.bridges = bridges;
+        fit.bridges = end.outcomes;
         return Ok(fit);
     };
 
     bundle_adjust(&g, &norm, cams, pts, start, stages, cfg, run, observer)
+}
+
+/// Where [`bridges`] leaves the adjustment to start: cameras and points (projective
+/// parameters), the bridges' outcomes, the run number the adjustment is reported under.
+struct BridgeEnd {
+    cams: Vec<f64>,
+    pts: Vec<f64>,
+    outcomes: Vec<BridgeOutcome>,
+    run: usize,
+}
+
+/// [`bridge`] with [`ProjectiveConfig::bridge`] and, when set (and different),
+/// [`ProjectiveConfig::second_bridge`] from the same affine start (reported as run
+/// `run + 1`): the end of lower projective cost, the outcomes (empty with one bridge), and
+/// the run number its adjustment is reported under. A bridge that fails or ends at a
+/// non-finite cost loses; when both fail, the first's error.
+#[allow(clippy::too_many_arguments)]
+fn bridges(
+    g: &Graph,
+    px: f64,
+    n_scalars: f64,
+    c: Vec<f64>,
+    x: Vec<f64>,
+    cfg: &ProjectiveConfig,
+    run: usize,
+    observer: &mut dyn Observer,
+    stages: &mut Vec<StageReport>,
+) -> Result<BridgeEnd> {
+    let Some(second) = cfg.second_bridge.filter(|b| *b != cfg.bridge) else {
+        let (cams, pts) = bridge(g, px, c, x, cfg.bridge, cfg, run, observer, stages)?;
+        return Ok(BridgeEnd {
+            cams,
+            pts,
+            outcomes: Vec::new(),
+            run,
+        });
+    };
+    let mut ends = Vec::with_capacity(2);
+    for (b, r) in [(cfg.bridge, run), (second, run + 1)] {
+        let t0 = Instant::now();
+        let mut st = Vec::new();
+        let out = bridge(g, px, c.clone(), x.clone(), b, cfg, r, observer, &mut st);
+        let cost = out.as_ref().map_or(f64::NAN, |(cams, pts)| {
+            bundle::cost(&models::Projective, g, cams, pts, &[])
+        });
+        let outcome = BridgeOutcome {
+            bridge: b,
+            start_rms_px: (cost / n_scalars).sqrt() * px,
+            iterations: st.iter().map(|s| s.iterations).sum(),
+            seconds: t0.elapsed().as_secs_f64(),
+            kept: false,
+        };
+        ends.push((out, st, outcome));
+    }
+    let second_wins = {
+        let (a, b) = (ends[0].2.start_rms_px, ends[1].2.start_rms_px);
+        b.is_finite() && !(a <= b)
+    };
+    let k = usize::from(second_wins);
+    ends[k].2.kept = true;
+    let outcomes: Vec<BridgeOutcome> = ends.iter().map(|e| e.2.clone()).collect();
+    let (out, st, _) = ends.swap_remove(k);
+    stages.extend(st);
+    let (cams, pts) = out?;
+    Ok(BridgeEnd {
+        cams,
+        pts,
+        outcomes,
+        run: run + k,
+    })
 }
 
 /// From affine cameras (12 per frame, normalized coordinates) and points (3 per track) to
