@@ -715,9 +715,7 @@ pub fn segment<R: Rng + ?Sized>(
     cfg: &SegmentConfig,
     rng: &mut R,
 ) -> Result<Segmentation> {
-    cfg.validate()?;
-    let t0 = Instant::now();
-    segment_estimator(&TrackSubspace::new(meas, &cfg.subspace), cfg, rng, t0)
+    segment_estimator(|| TrackSubspace::new(meas, &cfg.subspace), cfg, rng)
 }
 
 /// [`segment`] of a sparse table's tracks, without its dense `2F × N` matrix: memory
@@ -730,27 +728,23 @@ pub fn segment_table<R: Rng + ?Sized>(
     cfg: &SegmentConfig,
     rng: &mut R,
 ) -> Result<Segmentation> {
-    cfg.validate()?;
-    let t0 = Instant::now();
-    segment_estimator(
-        &TrackSubspace::from_table(table, &cfg.subspace),
-        cfg,
-        rng,
-        t0,
-    )
+    segment_estimator(|| TrackSubspace::from_table(table, &cfg.subspace), cfg, rng)
 }
 
-/// [`segment`] of the tracks `ts` holds (`cfg` validated), whole or window by window.
+/// [`segment`] of the tracks of the estimator `build` makes once `cfg` is validated (the
+/// clock starts before it is built), whole or window by window.
 fn segment_estimator<R: Rng + ?Sized>(
-    ts: &TrackSubspace,
+    build: impl FnOnce() -> TrackSubspace,
     cfg: &SegmentConfig,
     rng: &mut R,
-    t0: Instant,
 ) -> Result<Segmentation> {
-    if let Some(w) = windows::plan(ts, cfg) {
-        return windows::segment_windows(ts, &w, cfg, rng, t0);
+    cfg.validate()?;
+    let t0 = Instant::now();
+    let ts = build();
+    if let Some(w) = windows::plan(&ts, cfg) {
+        return windows::segment_windows(&ts, &w, cfg, rng, t0);
     }
-    segment_tracks(ts, cfg, rng, t0, None)
+    segment_tracks(&ts, cfg, rng, t0, None)
 }
 
 /// [`segment`] on the tracks `ts` holds (`cfg` already validated; `t0` starts the clock).
