@@ -139,6 +139,26 @@ fn main() {
                 continue;
             }
         };
+        // A track seen in fewer than two frames constrains nothing: the pipeline sets it
+        // aside (and reports it); so does the benchmark (Merton 3 has nine such tracks).
+        let kept: Vec<usize> = (0..meas.n_points())
+            .filter(|&p| {
+                (0..meas.n_frames())
+                    .filter(|&f| meas.is_visible(f, p))
+                    .count()
+                    >= 2
+            })
+            .collect();
+        let meas = if kept.len() < meas.n_points() {
+            eprintln!(
+                "{name}: {} of {} tracks seen in fewer than two frames, set aside",
+                meas.n_points() - kept.len(),
+                meas.n_points()
+            );
+            meas.select_tracks(&kept)
+        } else {
+            meas
+        };
         for v in &variants {
             let Some(cfg) = variant(v) else {
                 println!("| {name} | {v} | unknown variant |");
