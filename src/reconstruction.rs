@@ -533,6 +533,10 @@ pub struct PerspectiveIntrinsics {
     pub principal_point: [f64; 2],
     /// `"given"`, `"image centre"`, `"track bounding box"`, or `"estimated"`.
     pub principal_point_source: &'static str,
+    /// A principal point estimate rejected as implausible (the principal point is then
+    /// held where `principal_point_source` says); absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub principal_point_rejected: Option<perspective::RejectedPrincipalPoint>,
     /// Radial distortion `k₁` of normalised coordinates (0 when not estimated).
     pub k1: f64,
     /// Aspect ratio `f_x / f_y` (1: square pixels); `K₀₀ = aspect_ratio · focal_px`.
@@ -669,6 +673,7 @@ impl PerspectiveResult {
             } else {
                 pf.assumed.principal_point_source
             },
+            principal_point_rejected: pf.principal_point_rejected.clone(),
             k1: model.k1,
             aspect_ratio: model.aspect,
             aspect_ratio_source: if cfg.estimate_aspect_ratio {
@@ -1214,6 +1219,7 @@ impl Reconstruction {
         if let Some(reason) = sparse_reason(&kept_table, config)? {
             let mut rec = sparse_reconstruction(table, kept, config, timer, reason, warnings)?;
             restore_image_frame(&mut rec, origin, config, pp_from_image_size);
+            warn_rejected_principal_point(&mut rec);
             return Ok(rec);
         }
         // 2. Robust pass (affine): outlier tracks, gross entries, other rigid objects.
@@ -1264,6 +1270,7 @@ impl Reconstruction {
             table, kept, selection, fitted, outliers, choice, timer, warnings,
         );
         restore_image_frame(&mut rec, origin, config, pp_from_image_size);
+        warn_rejected_principal_point(&mut rec);
         Ok(rec)
     }
 
@@ -3352,6 +3359,20 @@ fn restore_image_frame(
         if pp_from_image_size && k.principal_point_source == "given" {
             k.principal_point_source = "image centre";
         }
+        if let Some(r) = &mut k.principal_point_rejected {
+            to_input(&mut r.principal_point);
+        }
+    }
+}
+
+/// The warning for a principal point estimate the perspective adjustment rejected, in the
+/// input's image coordinates (after [`restore_image_frame`]).
+fn warn_rejected_principal_point(rec: &mut Reconstruction) {
+    if let Some(pe) = &rec.perspective
+        && let Some(r) = &pe.intrinsics.principal_point_rejected
+    {
+        let w = r.warning(pe.intrinsics.principal_point);
+        rec.warnings.push(w);
     }
 }
 

@@ -486,6 +486,9 @@ pub struct IntrinsicsRecord {
     #[serde(deserialize_with = "nullable")]
     pub principal_point: [f64; 2],
     pub principal_point_source: String,
+    /// A principal point estimate rejected as implausible (absent when none was).
+    #[serde(default)]
+    pub principal_point_rejected: Option<crate::perspective::RejectedPrincipalPoint>,
     #[serde(deserialize_with = "nullable")]
     pub k1: f64,
     /// `f_x / f_y` (1 in files written before it existed).

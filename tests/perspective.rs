@@ -537,3 +537,60 @@ fn starts_screened_on_a_subset_end_where_the_whole_tables_screening_does() {
         e.structure_rel
     );
 }
+
+/// A principal point freed on a short turntable (10 frames, image size unknown) can run out
+/// of the picture along the direction in which it trades against the rotation. The estimate
+/// is rejected then (COLMAP's rule for bogus cameras: the principal point outside the image
+/// — here the observations' bounding box); the fit holds the bounding box's centre, says so,
+/// and its focal length is closer to the truth than the rejected one's.
+#[test]
+fn an_implausible_principal_point_estimate_is_rejected() {
+    let s = generate(&SynthConfig {
+        camera: CameraModel::Perspective,
+        frames: 10,
+        points: 60,
+        noise: 0.5,
+        focal: Some(500.0),
+        distance: 5.0,
+        seed: 2,
+        ..SynthConfig::default()
+    })
+    .unwrap();
+    let cfg = Config {
+        camera: CameraModel::Perspective,
+        ..Config::default()
+    };
+    let rec = Reconstruction::from_tracks(&s.table, &cfg).unwrap();
+    let per = rec.perspective.as_ref().expect("perspective result");
+    let k = &per.intrinsics;
+    let rejected = k
+        .principal_point_rejected
+        .as_ref()
+        .expect("the freed principal point leaves the observations' bounding box");
+    assert_eq!(k.principal_point_source, "track bounding box");
+    assert!(rec.warnings.iter().any(|w| w.contains("was rejected")));
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for f in 0..s.table.n_frames() {
+        for p in 0..s.table.n_tracks() {
+            if let Some(v) = s.table.get(f, p) {
+                for d in 0..2 {
+                    lo[d] = lo[d].min(v[d]);
+                    hi[d] = hi[d].max(v[d]);
+                }
+            }
+        }
+    }
+    let inside = |c: [f64; 2]| (0..2).all(|d| c[d] >= lo[d] && c[d] <= hi[d]);
+    assert!(!inside(rejected.principal_point), "{rejected:?}");
+    assert!(inside(k.principal_point), "{:?}", k.principal_point);
+    for d in 0..2 {
+        assert!((k.principal_point[d] - (lo[d] + hi[d]) / 2.0).abs() < 1e-6);
+    }
+    let err = |f: f64| (f - 500.0).abs() / 500.0;
+    assert!(
+        err(k.focal_px) < err(rejected.focal_px) && err(k.focal_px) < 0.05,
+        "focal {} px held, {} px rejected",
+        k.focal_px,
+        rejected.focal_px
+    );
+}

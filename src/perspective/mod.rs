@@ -359,7 +359,8 @@ pub struct PerspectiveFit {
     /// `None` from [`adjust`].
     pub selfcal: Option<SelfCalibration>,
     /// The stages: `metric-ba`, and `metric-ba-intrinsics` when the principal point or
-    /// `k₁` were estimated.
+    /// `k₁` were estimated (`metric-ba-intrinsics-rejected` for a stage whose principal
+    /// point estimate was rejected, see [`PerspectiveFit::principal_point_rejected`]).
     pub stages: Vec<StageReport>,
     /// Report of the last adjustment.
     pub report: SolverReport,
@@ -372,6 +373,10 @@ pub struct PerspectiveFit {
     pub in_front: f64,
     /// Whether the principal point was estimated.
     pub principal_point_estimated: bool,
+    /// The principal point estimate rejected as implausible (outside the image, or with a
+    /// focal length below a tenth of its side): the fit then holds the assumed principal
+    /// point, and `principal_point_estimated` is false.
+    pub principal_point_rejected: Option<RejectedPrincipalPoint>,
     /// The starts [`fit`] screened (empty from [`adjust`]).
     pub starts: Vec<StartReport>,
 }
@@ -1021,37 +1026,64 @@ fn adjust_graph(
             &mut stages,
         )?
         .report;
+    let mut principal_point_rejected = None;
     if estimate_pp || cfg.distortion || cfg.estimate_aspect_ratio {
         let (f_now, _, k_now) = metric.intrinsics(&cams[..cl], &glob);
         let a_now = metric.aspect(&glob);
-        let free = Metric {
-            focal,
-            principal_point: (!estimate_pp).then_some(pp0),
-            k1: (!cfg.distortion).then_some(k_now),
-            aspect: (!cfg.estimate_aspect_ratio).then_some(a_now),
-        };
-        let mut glob2 = free.glob(f_now, pp0, k_now, a_now);
-        let stage = Stage {
-            name: "metric-ba-intrinsics",
-            what: "metric bundle adjustment (principal point, distortion, aspect ratio)",
-            rms_scale: s,
-        };
-        report = stage
-            .run(
-                &Robust { inner: free, loss },
-                g,
-                &mut cams,
-                &mut pts,
-                &mut glob2,
-                &cfg.bundle,
-                run,
-                observer,
-                &mut stages,
-            )?
-            .report;
-        metric = free;
-        glob = glob2;
+        // The first stage's end, to return to when the freed principal point is implausible.
+        let held = estimate_pp.then(|| (cams.clone(), pts.clone(), report.clone()));
+        let mut pp_free = estimate_pp;
+        loop {
+            let free = Metric {
+                focal,
+                principal_point: (!pp_free).then_some(pp0),
+                k1: (!cfg.distortion).then_some(k_now),
+                aspect: (!cfg.estimate_aspect_ratio).then_some(a_now),
+            };
+            let mut glob2 = free.glob(f_now, pp0, k_now, a_now);
+            let stage = Stage {
+                name: "metric-ba-intrinsics",
+                what: "metric bundle adjustment (principal point, distortion, aspect ratio)",
+                rms_scale: s,
+            };
+            let r = stage
+                .run(
+                    &Robust { inner: free, loss },
+                    g,
+                    &mut cams,
+                    &mut pts,
+                    &mut glob2,
+                    &cfg.bundle,
+                    run,
+                    observer,
+                    &mut stages,
+                )?
+                .report;
+            if pp_free
+                && let Some(rejected) =
+                    implausible_intrinsics(&free, &cams, &glob2, g, assumed, cfg)
+                && let Some((c, x, r0)) = held.clone()
+            {
+                // Back to the principal point held (COLMAP's rule for bogus cameras):
+                // the first stage's end, and the other intrinsics freed again from it.
+                if let Some(last) = stages.last_mut() {
+                    last.stage = "metric-ba-intrinsics-rejected".into();
+                }
+                principal_point_rejected = Some(rejected);
+                (cams, pts, report) = (c, x, r0);
+                pp_free = false;
+                if cfg.distortion || cfg.estimate_aspect_ratio {
+                    continue;
+                }
+                break;
+            }
+            report = r;
+            metric = free;
+            glob = glob2;
+            break;
+        }
     }
+    let estimate_pp = estimate_pp && principal_point_rejected.is_none();
     // Which entries the loss down-weights (residual beyond 2δ), and the plain RMS.
     let mut downweighted = Vec::new();
     let (mut ss, mut n) = (0.0, 0usize);
@@ -1095,7 +1127,103 @@ fn adjust_graph(
         assumed: *assumed,
         downweighted,
         principal_point_estimated: estimate_pp,
+        principal_point_rejected,
         starts: Vec::new(),
+    })
+}
+
+/// A principal point estimate the adjustment rejected, and why.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct RejectedPrincipalPoint {
+    /// The estimate, pixels.
+    pub principal_point: [f64; 2],
+    /// The focal length that came with it (the smallest over the frames), pixels.
+    pub focal_px: f64,
+    /// Why it was rejected.
+    pub reason: String,
+}
+
+impl RejectedPrincipalPoint {
+    /// The warning the pipeline reports, `held` the principal point the fit kept (pixels).
+    pub fn warning(&self, held: [f64; 2]) -> String {
+        format!(
+            "the principal point estimate ({:.1}, {:.1}) px, with a focal length of {:.3} px, \
+             was rejected: {}; the principal point is held at ({:.1}, {:.1}) px (give \
+             --image-size or --principal-point if it is known)",
+            self.principal_point[0],
+            self.principal_point[1],
+            self.focal_px,
+            self.reason,
+            held[0],
+            held[1]
+        )
+    }
+}
+
+/// Whether the intrinsics of a stage that freed the principal point are physically
+/// implausible, by COLMAP's rule for "bogus" cameras (Schönberger & Frahm, CVPR 2016;
+/// `Camera::HasBogusParams`): the principal point outside the image (the observations'
+/// bounding box, and with a known size the square of the image's larger side around the
+/// assumed principal point), or a focal length below 0.1 of that region's larger side (a
+/// field of view above 157°). A turntable or a short
+/// arc leaves the principal point nearly unobservable (it trades against the rotation);
+/// the adjustment can then descend a valley towards a degenerate camera whose cost is a
+/// little lower — measured: focal 0.7 px, principal point 500 px off, on a 10-frame arc
+/// whose truth is 500 px. `O(n_obs)` for the bounding box.
+fn implausible_intrinsics(
+    m: &Metric,
+    cams: &[f64],
+    glob: &[f64],
+    g: &projective::bundle::Graph,
+    assumed: &Assumed,
+    cfg: &PerspectiveConfig,
+) -> Option<RejectedPrincipalPoint> {
+    let s = assumed.scale;
+    let cl = m.cam_len();
+    let (_, pp, _) = m.intrinsics(&cams[..cl], glob);
+    let pp_px = [
+        assumed.principal_point[0] + s * pp[0],
+        assumed.principal_point[1] + s * pp[1],
+    ];
+    let focal_px = (0..g.n_cams)
+        .map(|f| m.intrinsics(&cams[f * cl..(f + 1) * cl], glob).0 * s)
+        .fold(f64::INFINITY, f64::min);
+    // The observations' bounding box, and with a known image size also the square of the
+    // image's larger side centred on the assumed principal point (the fit's coordinates are
+    // the input's moved and, with an aspect ratio, scaled: the image's own corners are not
+    // known here).
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for w in &g.w {
+        for d in 0..2 {
+            let v = assumed.principal_point[d] + s * w[d];
+            lo[d] = lo[d].min(v);
+            hi[d] = hi[d].max(v);
+        }
+    }
+    let what = match cfg.intrinsics.image_size {
+        Some([w, h]) => {
+            let half = w.max(h) as f64 / 2.0;
+            for d in 0..2 {
+                lo[d] = lo[d].min(assumed.principal_point[d] - half);
+                hi[d] = hi[d].max(assumed.principal_point[d] + half);
+            }
+            "the image"
+        }
+        None => "the observations' bounding box",
+    };
+    let side = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+    let inside = (0..2).all(|d| pp_px[d] >= lo[d] && pp_px[d] <= hi[d]);
+    let reason = if !inside {
+        format!("outside {what}")
+    } else if !(focal_px >= 0.1 * side) {
+        format!("focal length below 0.1 of {what}'s larger side ({side:.1} px)")
+    } else {
+        return None;
+    };
+    Some(RejectedPrincipalPoint {
+        principal_point: pp_px,
+        focal_px,
+        reason,
     })
 }
 
