@@ -487,7 +487,7 @@ pub struct IntrinsicsRecord {
     pub principal_point: [f64; 2],
     pub principal_point_source: String,
     /// A principal point estimate rejected as implausible (absent when none was).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub principal_point_rejected: Option<crate::perspective::RejectedPrincipalPoint>,
     #[serde(deserialize_with = "nullable")]
     pub k1: f64,

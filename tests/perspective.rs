@@ -586,6 +586,17 @@ fn an_implausible_principal_point_estimate_is_rejected() {
     for d in 0..2 {
         assert!((k.principal_point[d] - (lo[d] + hi[d]) / 2.0).abs() < 1e-6);
     }
+    // reconstruction.json carries the rejected estimate, and the typed reader keeps it.
+    let dir = std::env::temp_dir().join(format!(
+        "rank3_rejected_principal_point_{}",
+        std::process::id()
+    ));
+    let written = rank3::output::write_all(&rec, &dir).unwrap();
+    let file = rank3::reconstruction_file::read(&written.json).unwrap();
+    let read = file.perspective.expect("perspective block").intrinsics;
+    assert_eq!(read.principal_point_rejected.as_ref(), Some(rejected));
+    assert_eq!(read.principal_point_source, "track bounding box");
+    let _ = std::fs::remove_dir_all(&dir);
     let err = |f: f64| (f - 500.0).abs() / 500.0;
     assert!(
         err(k.focal_px) < err(rejected.focal_px) && err(k.focal_px) < 0.05,
