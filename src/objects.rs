@@ -15,7 +15,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use serde::Serialize;
 
-use crate::segment::{SegmentConfig, Segmentation, segment_table};
+use crate::segment::{Label, SegmentConfig, Segmentation, segment_table};
 use crate::{Config, Id, Reconstruction, Result, TrackTable};
 
 /// One object's result.
@@ -43,6 +43,11 @@ pub struct MultiBody {
     pub objects: Vec<ObjectResult>,
     /// Input track ids (for `objects.csv`).
     pub track_ids: Vec<Id>,
+    /// Unscored tracks ([`crate::segment::Label::Unscored`]) reconstructed with the only
+    /// object, when the segmentation found one (input column indices, increasing; empty
+    /// otherwise). With one group there is no other group to tell them from: like the
+    /// single-object pipeline, the object's own robust pass judges them.
+    pub unscored_in_the_only_object: Vec<usize>,
 }
 
 /// A serializable summary (`segmentation.json`).
@@ -67,6 +72,9 @@ pub struct MultiBodyReport {
     /// Tracks seen in too few frames to be scored and not placed by the short-track step
     /// ([`crate::segment::Label::Unscored`]).
     pub n_unscored_tracks: usize,
+    /// Of those, the tracks reconstructed with the only object when one was found (all of
+    /// them then; 0 with several objects).
+    pub n_unscored_in_the_only_object: usize,
     /// Per-coordinate RMS of all grouped tracks' subspace fits, px.
     pub sigma_px: f64,
     /// Final energy (χ² units).
@@ -117,6 +125,7 @@ impl MultiBody {
             merge_tests: s.merge_tests.clone(),
             n_outlier_tracks: s.n_outliers(),
             n_unscored_tracks: s.n_unscored(),
+            n_unscored_in_the_only_object: self.unscored_in_the_only_object.len(),
             sigma_px: s.sigma,
             energy: s.energy,
             label_cost: s.label_cost,
@@ -141,11 +150,23 @@ impl MultiBody {
         }
     }
 
-    /// `track,object` lines for every input track (`-1`: outlier or unscored).
+    /// `track,object` lines for every input track (`-1`: outlier, or unscored with several
+    /// objects; an unscored track reconstructed with the only object is that object's).
     pub fn objects_csv(&self) -> String {
         let mut s = String::from("track,object\n");
-        for (id, l) in self.track_ids.iter().zip(&self.segmentation.labels) {
-            s.push_str(&format!("{},{}\n", id, l.code()));
+        let mut placed = self.unscored_in_the_only_object.iter().peekable();
+        for (p, (id, l)) in self
+            .track_ids
+            .iter()
+            .zip(&self.segmentation.labels)
+            .enumerate()
+        {
+            let code = if placed.next_if_eq(&&p).is_some() {
+                0
+            } else {
+                l.code()
+            };
+            s.push_str(&format!("{id},{code}\n"));
         }
         s
     }
@@ -167,15 +188,27 @@ pub fn reconstruct_objects(
     let mut rng = StdRng::seed_from_u64(config.seed);
     let segmentation = segment_table(table, seg, &mut rng)?;
     let all_frames: Vec<usize> = (0..table.n_frames()).collect();
+    let unscored_in_the_only_object: Vec<usize> = if segmentation.objects.len() == 1 {
+        (0..segmentation.labels.len())
+            .filter(|&p| segmentation.labels[p] == Label::Unscored)
+            .collect()
+    } else {
+        Vec::new()
+    };
     let objects = segmentation
         .objects
         .iter()
         .enumerate()
         .map(|(k, g)| {
-            let sub = table.select(&all_frames, &g.tracks);
+            let mut tracks = g.tracks.clone();
+            if k == 0 && !unscored_in_the_only_object.is_empty() {
+                tracks.extend_from_slice(&unscored_in_the_only_object);
+                tracks.sort_unstable();
+            }
+            let sub = table.select(&all_frames, &tracks);
             ObjectResult {
                 index: k,
-                tracks: g.tracks.clone(),
+                tracks,
                 subspace_rms_px: g.rms,
                 pieces: g.pieces,
                 reconstruction: Reconstruction::from_tracks(&sub, config)
@@ -187,5 +220,6 @@ pub fn reconstruct_objects(
         segmentation,
         objects,
         track_ids: table.track_ids().to_vec(),
+        unscored_in_the_only_object,
     })
 }

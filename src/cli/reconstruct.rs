@@ -528,11 +528,16 @@ pub fn reconstruct_objects(
     rank3::output::write_objects(&mb, given, out)?;
     let s = &mb.segmentation;
     info!(
-        "segmentation: {} object(s) ({}), {} outlier and {} unscored tracks, σ {:.3} px, {} rounds, {:.2} s",
+        "segmentation: {} object(s) ({}), {} outlier and {} unscored tracks{}, σ {:.3} px, {} rounds, {:.2} s",
         mb.objects.len(),
         if given { "given" } else { "found" },
         s.n_outliers(),
         s.n_unscored(),
+        if mb.unscored_in_the_only_object.is_empty() {
+            ""
+        } else {
+            " (reconstructed with the only object)"
+        },
         s.sigma,
         s.rounds,
         s.seconds
