@@ -15,7 +15,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use serde::Serialize;
 
-use crate::segment::{Label, SegmentConfig, Segmentation, segment_table};
+use crate::segment::{CountRule, Label, Objects, SegmentConfig, Segmentation, segment_table};
 use crate::{Config, Id, Reconstruction, Result, TrackTable};
 
 /// One object's result.
@@ -58,8 +58,9 @@ pub struct MultiBodyReport {
     /// Number of groups found.
     pub n_objects: usize,
     /// Which rule set that number: `"given"`, `"label_cost"`, `"eigengap"`,
-    /// `"separation"`, `"perspective_merge"` or `"windows"` (a long sequence of short tracks
-    /// segmented window by window; docs/math.md §11).
+    /// `"separation"`, `"perspective_merge"`, `"one_group_fallback"` (none found, one
+    /// taken) or `"windows"` (a long sequence of short tracks segmented window by window;
+    /// docs/math.md §11).
     pub count_rule: crate::segment::CountRule,
     /// The least separated pair of groups' median ratio of a track's RMS under the other
     /// group's subspace to that under its own; `null` with one group.
@@ -186,7 +187,22 @@ pub fn reconstruct_objects(
     seg: &SegmentConfig,
 ) -> Result<MultiBody> {
     let mut rng = StdRng::seed_from_u64(config.seed);
-    let segmentation = segment_table(table, seg, &mut rng)?;
+    let mut segmentation = segment_table(table, seg, &mut rng)?;
+    // A count found to be 0 (every track an outlier: on a few tracks no group pays for its
+    // parameters) leaves nothing reconstructed; the single-object pipeline would fit them.
+    // One group is taken instead, its outliers still labelled by the energy.
+    if segmentation.objects.is_empty() && seg.objects == Objects::Auto {
+        let one = SegmentConfig {
+            objects: Objects::Count(1),
+            ..seg.clone()
+        };
+        if let Ok(mut s1) = segment_table(table, &one, &mut rng)
+            && !s1.objects.is_empty()
+        {
+            s1.count_rule = CountRule::OneGroupFallback;
+            segmentation = s1;
+        }
+    }
     let all_frames: Vec<usize> = (0..table.n_frames()).collect();
     let unscored_in_the_only_object: Vec<usize> = if segmentation.objects.len() == 1 {
         (0..segmentation.labels.len())

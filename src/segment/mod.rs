@@ -167,6 +167,10 @@ pub enum CountRule {
     /// ([`SegmentConfig::windows`]): the windows' groups linked through the tracks they
     /// share.
     Windows,
+    /// With [`Objects::Auto`], no group was worth its label cost (a table of a few tracks,
+    /// every one an outlier): segmented again with one group, the scene
+    /// ([`crate::objects::reconstruct_objects`]).
+    OneGroupFallback,
 }
 
 /// Settings of [`segment`]. Every field has a documented default.
@@ -859,6 +863,20 @@ fn segment_tracks<R: Rng + ?Sized>(
             out
         })
         .collect();
+    // A table too small for its local samples to leave a residual (a sample of 4 tracks
+    // fits a 3-dimensional affine subspace exactly, and a refit needs more) is one sample:
+    // the first well-conditioned sample's subspace refitted to every eligible track.
+    let fitted = if fitted.is_empty() && eligible.len() > 4 {
+        samples
+            .iter()
+            .find_map(|set| ts.fit(&set[..4]))
+            .and_then(|m0| info.refit(&m0, &eligible, sweeps))
+            .filter(|f| f.2 <= info.sigma2_max)
+            .into_iter()
+            .collect()
+    } else {
+        fitted
+    };
     if fitted.is_empty() {
         return Err(Error::Degenerate(
             "no sample of neighbouring tracks determines a 3-dimensional subspace".into(),
