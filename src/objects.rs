@@ -15,7 +15,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use serde::Serialize;
 
-use crate::segment::{CountRule, Label, Objects, SegmentConfig, Segmentation, segment_table};
+use crate::segment::{Label, SegmentConfig, Segmentation, segment_table};
 use crate::{Config, Id, Reconstruction, Result, TrackTable};
 
 /// One object's result.
@@ -187,22 +187,7 @@ pub fn reconstruct_objects(
     seg: &SegmentConfig,
 ) -> Result<MultiBody> {
     let mut rng = StdRng::seed_from_u64(config.seed);
-    let mut segmentation = segment_table(table, seg, &mut rng)?;
-    // A count found to be 0 (every track an outlier: on a few tracks no group pays for its
-    // parameters) leaves nothing reconstructed; the single-object pipeline would fit them.
-    // One group is taken instead, its outliers still labelled by the energy.
-    if segmentation.objects.is_empty() && seg.objects == Objects::Auto {
-        let one = SegmentConfig {
-            objects: Objects::Count(1),
-            ..seg.clone()
-        };
-        if let Ok(mut s1) = segment_table(table, &one, &mut rng)
-            && !s1.objects.is_empty()
-        {
-            s1.count_rule = CountRule::OneGroupFallback;
-            segmentation = s1;
-        }
-    }
+    let segmentation = segment_table(table, seg, &mut rng)?;
     let all_frames: Vec<usize> = (0..table.n_frames()).collect();
     let unscored_in_the_only_object: Vec<usize> = if segmentation.objects.len() == 1 {
         (0..segmentation.labels.len())

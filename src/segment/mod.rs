@@ -168,8 +168,7 @@ pub enum CountRule {
     /// share.
     Windows,
     /// With [`Objects::Auto`], no group was worth its label cost (a table of a few tracks,
-    /// every one an outlier): segmented again with one group, the scene
-    /// ([`crate::objects::reconstruct_objects`]).
+    /// every one an outlier): segmented again with one group, the scene.
     OneGroupFallback,
 }
 
@@ -737,6 +736,11 @@ pub fn segment_table<R: Rng + ?Sized>(
 
 /// [`segment`] of the tracks of the estimator `build` makes once `cfg` is validated (the
 /// clock starts before it is built), whole or window by window.
+///
+/// With [`Objects::Auto`], a count found to be 0 (every track an outlier: on a few tracks
+/// no group pays for its parameters) would leave nothing to reconstruct, where the
+/// single-object pipeline fits them: the tracks are segmented again with one group, its
+/// outliers still labelled by the energy ([`CountRule::OneGroupFallback`]).
 fn segment_estimator<R: Rng + ?Sized>(
     build: impl FnOnce() -> TrackSubspace,
     cfg: &SegmentConfig,
@@ -748,7 +752,21 @@ fn segment_estimator<R: Rng + ?Sized>(
     if let Some(w) = windows::plan(&ts, cfg) {
         return windows::segment_windows(&ts, &w, cfg, rng, t0);
     }
-    segment_tracks(&ts, cfg, rng, t0, None)
+    let seg = segment_tracks(&ts, cfg, rng, t0, None)?;
+    if !seg.objects.is_empty() || cfg.objects != Objects::Auto {
+        return Ok(seg);
+    }
+    let one = SegmentConfig {
+        objects: Objects::Count(1),
+        ..cfg.clone()
+    };
+    match segment_tracks(&ts, &one, rng, t0, None) {
+        Ok(s1) if !s1.objects.is_empty() => Ok(Segmentation {
+            count_rule: CountRule::OneGroupFallback,
+            ..s1
+        }),
+        _ => Ok(seg),
+    }
 }
 
 /// [`segment`] on the tracks `ts` holds (`cfg` already validated; `t0` starts the clock).
