@@ -43,11 +43,6 @@ pub struct MultiBody {
     pub objects: Vec<ObjectResult>,
     /// Input track ids (for `objects.csv`).
     pub track_ids: Vec<Id>,
-    /// Unscored tracks ([`crate::segment::Label::Unscored`]) reconstructed with the only
-    /// object, when the segmentation found one (input column indices, increasing; empty
-    /// otherwise). With one group there is no other group to tell them from: like the
-    /// single-object pipeline, the object's own robust pass judges them.
-    pub unscored_in_the_only_object: Vec<usize>,
 }
 
 /// A serializable summary (`segmentation.json`).
@@ -115,6 +110,14 @@ pub struct ObjectReport {
 }
 
 impl MultiBody {
+    /// Unscored tracks ([`Label::Unscored`]) reconstructed with the only object, when the
+    /// segmentation found one (input column indices, increasing; empty otherwise): with one
+    /// group there is no other group to tell them from, and the object's own robust pass
+    /// judges them, as the single-object pipeline's does.
+    pub fn unscored_in_the_only_object(&self) -> Vec<usize> {
+        unscored_in_the_only_object(&self.segmentation)
+    }
+
     /// The `segmentation.json` summary.
     pub fn report(&self, given: bool) -> MultiBodyReport {
         let s = &self.segmentation;
@@ -126,7 +129,7 @@ impl MultiBody {
             merge_tests: s.merge_tests.clone(),
             n_outlier_tracks: s.n_outliers(),
             n_unscored_tracks: s.n_unscored(),
-            n_unscored_in_the_only_object: self.unscored_in_the_only_object.len(),
+            n_unscored_in_the_only_object: self.unscored_in_the_only_object().len(),
             sigma_px: s.sigma,
             energy: s.energy,
             label_cost: s.label_cost,
@@ -154,15 +157,10 @@ impl MultiBody {
     /// `track,object` lines for every input track (`-1`: outlier, or unscored with several
     /// objects; an unscored track reconstructed with the only object is that object's).
     pub fn objects_csv(&self) -> String {
+        let only = self.segmentation.objects.len() == 1;
         let mut s = String::from("track,object\n");
-        let mut placed = self.unscored_in_the_only_object.iter().peekable();
-        for (p, (id, l)) in self
-            .track_ids
-            .iter()
-            .zip(&self.segmentation.labels)
-            .enumerate()
-        {
-            let code = if placed.next_if_eq(&&p).is_some() {
+        for (id, l) in self.track_ids.iter().zip(&self.segmentation.labels) {
+            let code = if only && *l == Label::Unscored {
                 0
             } else {
                 l.code()
@@ -189,21 +187,15 @@ pub fn reconstruct_objects(
     let mut rng = StdRng::seed_from_u64(config.seed);
     let segmentation = segment_table(table, seg, &mut rng)?;
     let all_frames: Vec<usize> = (0..table.n_frames()).collect();
-    let unscored_in_the_only_object: Vec<usize> = if segmentation.objects.len() == 1 {
-        (0..segmentation.labels.len())
-            .filter(|&p| segmentation.labels[p] == Label::Unscored)
-            .collect()
-    } else {
-        Vec::new()
-    };
+    let unscored = unscored_in_the_only_object(&segmentation);
     let objects = segmentation
         .objects
         .iter()
         .enumerate()
         .map(|(k, g)| {
             let mut tracks = g.tracks.clone();
-            if k == 0 && !unscored_in_the_only_object.is_empty() {
-                tracks.extend_from_slice(&unscored_in_the_only_object);
+            if k == 0 && !unscored.is_empty() {
+                tracks.extend_from_slice(&unscored);
                 tracks.sort_unstable();
             }
             let sub = table.select(&all_frames, &tracks);
@@ -221,6 +213,15 @@ pub fn reconstruct_objects(
         segmentation,
         objects,
         track_ids: table.track_ids().to_vec(),
-        unscored_in_the_only_object,
     })
+}
+
+/// [`MultiBody::unscored_in_the_only_object`] of `s`.
+fn unscored_in_the_only_object(s: &Segmentation) -> Vec<usize> {
+    if s.objects.len() != 1 {
+        return Vec::new();
+    }
+    (0..s.labels.len())
+        .filter(|&p| s.labels[p] == Label::Unscored)
+        .collect()
 }

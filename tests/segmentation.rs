@@ -668,7 +668,7 @@ fn unscored_tracks_join_the_only_object() {
     for &p in &short {
         assert_eq!(mb.segmentation.labels[p], Label::Unscored, "track {p}");
     }
-    assert_eq!(mb.unscored_in_the_only_object, short);
+    assert_eq!(mb.unscored_in_the_only_object(), short);
     assert_eq!(mb.report(false).n_unscored_in_the_only_object, short.len());
     let o = &mb.objects[0];
     assert!(short.iter().all(|p| o.tracks.contains(p)));

@@ -533,7 +533,7 @@ pub fn reconstruct_objects(
         if given { "given" } else { "found" },
         s.n_outliers(),
         s.n_unscored(),
-        if mb.unscored_in_the_only_object.is_empty() {
+        if mb.unscored_in_the_only_object().is_empty() {
             ""
         } else {
             " (reconstructed with the only object)"
