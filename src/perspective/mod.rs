@@ -401,17 +401,23 @@ pub fn assumed_frame(meas: &Measurements, k: &Intrinsics) -> Assumed {
     )
 }
 
+/// The smallest and largest coordinates of `positions` (infinite when there are none).
+fn bounding_box(positions: impl Iterator<Item = [f64; 2]>) -> ([f64; 2], [f64; 2]) {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for v in positions {
+        for d in 0..2 {
+            lo[d] = lo[d].min(v[d]);
+            hi[d] = hi[d].max(v[d]);
+        }
+    }
+    (lo, hi)
+}
+
 /// [`assumed_frame`] of any set of observed positions (pixels).
 pub fn assumed_frame_of(positions: impl Iterator<Item = [f64; 2]>, k: &Intrinsics) -> Assumed {
     let Some([w, h]) = k.image_size else {
         // Without the image size, the observations' bounding box stands in for it.
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for v in positions {
-            for d in 0..2 {
-                lo[d] = lo[d].min(v[d]);
-                hi[d] = hi[d].max(v[d]);
-            }
-        }
+        let (lo, hi) = bounding_box(positions);
         let side = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1.0);
         let (pp, source) = match k.principal_point {
             Some(c) => (c, "given"),
@@ -1192,14 +1198,8 @@ fn implausible_intrinsics(
     // image's larger side centred on the assumed principal point (the fit's coordinates are
     // the input's moved and, with an aspect ratio, scaled: the image's own corners are not
     // known here).
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for w in &g.w {
-        for d in 0..2 {
-            let v = assumed.principal_point[d] + s * w[d];
-            lo[d] = lo[d].min(v);
-            hi[d] = hi[d].max(v);
-        }
-    }
+    let c = assumed.principal_point;
+    let (mut lo, mut hi) = bounding_box(g.w.iter().map(|w| [c[0] + s * w[0], c[1] + s * w[1]]));
     let what = match cfg.intrinsics.image_size {
         Some([w, h]) => {
             let half = w.max(h) as f64 / 2.0;
