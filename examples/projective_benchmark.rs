@@ -132,8 +132,8 @@ fn main() {
             );
             continue;
         }
-        let meas = match rank3::TrackTable::read(&path) {
-            Ok(t) => t.measurements(),
+        let table = match rank3::TrackTable::read(&path) {
+            Ok(t) => t,
             Err(e) => {
                 println!("| {name} | - | cannot read: {e} |");
                 continue;
@@ -141,24 +141,18 @@ fn main() {
         };
         // A track seen in fewer than two frames constrains nothing: the pipeline sets it
         // aside (and reports it); so does the benchmark (Merton 3 has nine such tracks).
-        let kept: Vec<usize> = (0..meas.n_points())
-            .filter(|&p| {
-                (0..meas.n_frames())
-                    .filter(|&f| meas.is_visible(f, p))
-                    .count()
-                    >= 2
-            })
+        let kept: Vec<usize> = (0..table.n_tracks())
+            .filter(|&p| table.track_len(p) >= 2)
             .collect();
-        let meas = if kept.len() < meas.n_points() {
+        if kept.len() < table.n_tracks() {
             eprintln!(
                 "{name}: {} of {} tracks seen in fewer than two frames, set aside",
-                meas.n_points() - kept.len(),
-                meas.n_points()
+                table.n_tracks() - kept.len(),
+                table.n_tracks()
             );
-            meas.select_tracks(&kept)
-        } else {
-            meas
-        };
+        }
+        let all_frames: Vec<usize> = (0..table.n_frames()).collect();
+        let meas = table.select(&all_frames, &kept).measurements();
         for v in &variants {
             let Some(cfg) = variant(v) else {
                 println!("| {name} | {v} | unknown variant |");
