@@ -1037,7 +1037,7 @@ fn adjust_graph(
         let (f_now, _, k_now) = metric.intrinsics(&cams[..cl], &glob);
         let a_now = metric.aspect(&glob);
         // The first stage's end, to return to when the freed principal point is implausible.
-        let held = estimate_pp.then(|| (cams.clone(), pts.clone(), report.clone()));
+        let mut held = estimate_pp.then(|| (cams.clone(), pts.clone(), report.clone()));
         let mut pp_free = estimate_pp;
         loop {
             let free = Metric {
@@ -1068,7 +1068,7 @@ fn adjust_graph(
             if pp_free
                 && let Some(rejected) =
                     implausible_intrinsics(&free, &cams, &glob2, g, assumed, cfg)
-                && let Some((c, x, r0)) = held.clone()
+                && let Some((c, x, r0)) = held.take()
             {
                 // Back to the principal point held (COLMAP's rule for bogus cameras):
                 // the first stage's end, and the other intrinsics freed again from it.
