@@ -523,7 +523,7 @@ pub struct SelfCalibrationRecord {
 /// One entry of `perspective.starts`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StartRecord {
-    /// `"self-calibration"` or `"affine"`.
+    /// `"self-calibration"`, `"affine"` or `"plane"`.
     pub kind: String,
     #[serde(deserialize_with = "nullable")]
     pub focal_px: f64,

@@ -41,6 +41,12 @@ pub enum Shape {
     Cloud,
     /// Points on the faces of a cube.
     Cube,
+    /// Points on one plane (a 2 × 2 square, like a wall or the ground), its normal
+    /// `(−0.5, 0.2, 1)` normalised: seen 27° off frontal at the start of either motion and
+    /// never edge-on. The projective factorization and the absolute dual quadric are not
+    /// determined by a plane; the perspective camera's planar start is
+    /// ([`crate::perspective::planar`]).
+    Plane,
 }
 
 /// Camera motion.
@@ -594,6 +600,12 @@ fn shape_points(shape: Shape, n: usize, rng: &mut StdRng) -> Vec<Vector3<f64>> {
                     g.sample(rng) * 0.7,
                     g.sample(rng) * 0.5,
                 )
+            }
+            Shape::Plane => {
+                let n = Vector3::new(-0.5, 0.2, 1.0).normalize();
+                let a = n.cross(&Vector3::y()).normalize();
+                let b = n.cross(&a);
+                a * u(rng, -1.0, 1.0) + b * u(rng, -1.0, 1.0)
             }
             Shape::Cube => {
                 let face = rng.random_range(0..6usize);

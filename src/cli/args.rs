@@ -67,6 +67,7 @@ pub enum ShapeArg {
     House,
     Cloud,
     Cube,
+    Plane,
 }
 
 #[derive(Clone, Copy, ValueEnum)]

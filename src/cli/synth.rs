@@ -85,6 +85,7 @@ pub fn synth(a: &SynthArgs) -> Result<(), rank3::Error> {
             ShapeArg::House => Shape::House,
             ShapeArg::Cloud => Shape::Cloud,
             ShapeArg::Cube => Shape::Cube,
+            ShapeArg::Plane => Shape::Plane,
         },
         motion: match a.motion {
             MotionArg::Turntable => Motion::Turntable,

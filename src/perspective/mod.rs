@@ -40,6 +40,7 @@
 
 pub(crate) mod long;
 pub mod models;
+pub mod planar;
 pub mod selfcal;
 
 pub use long::{fit_observations, refine_observations};
@@ -121,6 +122,14 @@ pub struct PerspectiveConfig {
     /// `[0.7, 1.5, 3]` (fields of view of about 70°, 37° and 19°); the adjustment moves the
     /// focal length from there.
     pub focal_grid: Vec<f64>,
+    /// Build and screen the planar start ([`planar`]: the focal length and the plane from
+    /// plane-induced homographies, the frames registered to the plane) when the
+    /// self-calibration start is not accepted early. A planar scene (or a camera that only
+    /// rotates) determines neither the projective factorization nor the absolute dual
+    /// quadric, and the other starts end far from the optimum there; elsewhere the planar
+    /// start costs one more screening and is not chosen. Default true.
+    #[serde(default = "default_planar_start")]
+    pub planar_start: bool,
     /// The geodesic acceleration (`LmConfig::geodesic_acceleration`'s `α`) of the
     /// long-sequence path's global adjustment ([`fit_observations`],
     /// [`refine_observations`]) when `bundle`'s own is 0. Its start is metric windows
@@ -177,6 +186,10 @@ fn default_focal_sample_windows() -> usize {
     32
 }
 
+fn default_planar_start() -> bool {
+    true
+}
+
 fn default_long_geodesic_acceleration() -> f64 {
     0.75
 }
@@ -203,6 +216,7 @@ impl Default for PerspectiveConfig {
             projective_iterations: 20,
             projective_refit_iterations: 5,
             focal_grid: vec![0.7, 1.5, 3.0],
+            planar_start: default_planar_start(),
             long_geodesic_acceleration: default_long_geodesic_acceleration(),
             focal_sample_windows: default_focal_sample_windows(),
             accept_at_noise: default_accept_at_noise(),
@@ -452,7 +466,8 @@ pub fn assumed_frame_of(positions: impl Iterator<Item = [f64; 2]>, k: &Intrinsic
 /// One start of the metric adjustment, screened by [`fit`].
 #[derive(Debug, Clone, Serialize)]
 pub struct StartReport {
-    /// `"self-calibration"` or `"affine"` (lifted from the scaled-orthographic model).
+    /// `"self-calibration"`, `"affine"` (lifted from the scaled-orthographic model) or
+    /// `"plane"` ([`planar`]).
     pub kind: &'static str,
     /// Focal length of the start, pixels (the median over frames for self-calibration).
     pub focal_px: f64,
@@ -480,7 +495,12 @@ pub struct StartReport {
 ///   depth of the points' centroid is `f / s_f` and the image of the centroid is kept.
 ///   Self-calibration is ill-conditioned for weak perspective and small rotations
 ///   (the absolute dual quadric is then close to rank 2); the affine model is not, and
-///   under weak perspective it is the first-order approximation of the true cameras.
+///   under weak perspective it is the first-order approximation of the true cameras;
+/// * the planar start ([`planar`], when [`PerspectiveConfig::planar_start`]): the focal
+///   length and a plane from plane-induced homographies, every frame registered to that
+///   plane. Neither of the others is near the optimum when the tracks lie on a plane (the
+///   projective factorization and the absolute dual quadric are then not determined, the
+///   affine model has rank 2).
 ///
 /// **Early acceptance** ([`PerspectiveConfig::accept_at_noise`]): the metric model is a
 /// special case of the projective one, so no metric start can end below the projective
@@ -676,6 +696,32 @@ pub(crate) fn fit_lazy<'a>(
                     ));
                 }
             }
+            screen(&mut starts, from, &mut best, subset.as_ref());
+        }
+    }
+    // The planar start: when the tracks lie on a plane (or the camera only rotates) the
+    // other starts are far from the optimum (module `planar`).
+    if !accepted && cfg.planar_start {
+        let side = match cfg.intrinsics.image_size {
+            Some([w, h]) => w.max(h) as f64,
+            None => s,
+        };
+        if let Some((model, calib)) =
+            planar::start(meas, assumed.principal_point, side, cfg.intrinsics.focal_px)
+        {
+            let from = starts.len();
+            starts.push((
+                StartReport {
+                    kind: "plane",
+                    focal_px: calib.focal_px,
+                    mirrored: false,
+                    rms_px: f64::NAN,
+                    chosen: false,
+                    screen_frames: 0,
+                    screen_tracks: 0,
+                },
+                model,
+            ));
             screen(&mut starts, from, &mut best, subset.as_ref());
         }
     }
