@@ -565,6 +565,13 @@ pub struct PerspectiveResult {
     pub downweighted: Vec<(Id, Id)>,
     /// Fraction of observations in front of their camera.
     pub in_front: f64,
+    /// How far the tracks are from what a camera only turning about its centre would see,
+    /// pixels ([`perspective::planar::rotation_parallax_px`]): within
+    /// [`ROTATION_ONLY_FACTOR`] times the RMS, the depths and the camera centres are not
+    /// determined (a warning says so). `None` when not measured (the long-sequence path, or
+    /// no pair of frames sharing 8 tracks).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rotation_parallax_px: Option<f64>,
     /// The fitted model (fit frames × fit tracks), for library users.
     #[serde(skip)]
     pub model: perspective::PerspectiveModel,
@@ -694,6 +701,7 @@ impl PerspectiveResult {
             points,
             downweighted,
             in_front: pf.in_front,
+            rotation_parallax_px: None,
             model,
             outlier_points,
         }
@@ -1865,7 +1873,19 @@ fn camera_stage(
                         ));
                     }
                 }
-                if per.in_front < 0.95 {
+                let parallax = perspective::planar::rotation_parallax_px(meas, &per.model);
+                let rotation_only =
+                    parallax.is_some_and(|px| px <= ROTATION_ONLY_FACTOR * per.rms_px);
+                if rotation_only {
+                    warnings.push(format!(
+                        "the camera only rotates: the best rotation between frames explains \
+                         the tracks to {:.3} px (the fit's RMS {:.3} px); the focal length and \
+                         the rotations are determined, the depths and the camera centres are \
+                         not (a panorama, not a reconstruction)",
+                        parallax.unwrap_or(f64::NAN),
+                        per.rms_px
+                    ));
+                } else if per.in_front < 0.95 {
                     warnings.push(format!(
                         "only {:.1} % of the observations are in front of their camera after \
                          the Euclidean upgrade: the self-calibration is unreliable (weak \
@@ -1873,7 +1893,7 @@ fn camera_stage(
                         100.0 * per.in_front
                     ));
                 }
-                PerspectiveResult::new(
+                let mut result = PerspectiveResult::new(
                     per,
                     &config.perspective,
                     &fitted.fit,
@@ -1883,7 +1903,9 @@ fn camera_stage(
                     kept.table,
                     &kept.tracks,
                     &fitted.used_tracks,
-                )
+                );
+                result.rotation_parallax_px = parallax;
+                result
             })
         }
         _ => None,
@@ -2730,6 +2752,13 @@ fn complete_block_rank_ratio(
     let s = &svd.s;
     (s.len() >= 4 && s[2] > 0.0).then(|| (s[3] / s[2], len, tracks.len(), f0))
 }
+
+/// [`PerspectiveResult::rotation_parallax_px`] at most this many times the fit's RMS: the
+/// camera only rotates. The largest median transfer distance of a camera that only rotates
+/// is about `1.7 σ` (the distance between two noisy positions, `σ` per coordinate), the
+/// fit's RMS about `σ`; 3 leaves room for the largest of many pairs' medians and for a
+/// translation too small to show above the noise.
+pub const ROTATION_ONLY_FACTOR: f64 = 3.0;
 
 /// Refits the projective verdict may ask for (each a full fit of the new selection).
 const PROJECTIVE_VERDICT_ROUNDS: usize = 5;

@@ -472,6 +472,9 @@ pub struct PerspectiveRecord {
     pub downweighted: Vec<(Id, Id)>,
     #[serde(deserialize_with = "nullable")]
     pub in_front: f64,
+    /// Absent when not measured (and from files written before it was).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation_parallax_px: Option<f64>,
 }
 
 /// `perspective.intrinsics`.

@@ -663,3 +663,59 @@ fn a_planar_scene_recovers_k_r_t_and_x() {
         off.rms_px
     );
 }
+
+/// A camera that only turns about its centre (a tripod pan) determines its focal length and
+/// rotations but no depth: the result says so (`rotation_parallax_px` within the noise, and
+/// a warning), while a perspective scene that moves the camera is not flagged.
+#[test]
+fn a_camera_that_only_rotates_is_reported() {
+    use faer::Mat;
+    use nalgebra::Rotation3;
+    use rank3::{Measurements, TrackTable};
+    let (nf, np, focal) = (12, 80, 500.0);
+    let mut state = 99u64;
+    let mut gauss = || {
+        // Sum of 12 uniforms − 6: a unit normal deviate, good enough for noise.
+        (0..12)
+            .map(|_| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (state >> 11) as f64 / (1u64 << 53) as f64
+            })
+            .sum::<f64>()
+            - 6.0
+    };
+    let points: Vec<Vector3<f64>> = (0..np)
+        .map(|_| Vector3::new(gauss(), 0.7 * gauss(), 6.0 + 0.5 * gauss()))
+        .collect();
+    let mut w = Mat::<f64>::zeros(2 * nf, np);
+    for f in 0..nf {
+        let a = f as f64 / (nf - 1) as f64;
+        let rot = Rotation3::from_euler_angles(0.08 * (6.0 * a).sin(), 0.35 * (a - 0.5), 0.0);
+        for (p, x) in points.iter().enumerate() {
+            let y = rot * x;
+            w[(2 * f, p)] = focal * y.x / y.z + 320.0 + 0.5 * gauss();
+            w[(2 * f + 1, p)] = focal * y.y / y.z + 240.0 + 0.5 * gauss();
+        }
+    }
+    let table = TrackTable::from_measurements(&Measurements::complete(w));
+    let mut cfg = config(Intrinsics::default());
+    cfg.perspective.intrinsics.image_size = Some([641, 481]);
+    let rec = Reconstruction::from_tracks(&table, &cfg).unwrap();
+    let per = rec.perspective.as_ref().unwrap();
+    let parallax = per.rotation_parallax_px.expect("measured");
+    assert!(parallax < 3.0 * per.rms_px, "parallax {parallax} px");
+    assert!(
+        rec.warnings.iter().any(|w| w.contains("only rotates")),
+        "{:?}",
+        rec.warnings
+    );
+    assert!((per.intrinsics.focal_px - focal).abs() < 0.05 * focal);
+    // The same cloud seen by a camera that moves: not flagged.
+    let s = scene(2.5, 0.0, 0.5, 5);
+    let rec = Reconstruction::from_tracks(&s.table, &cfg).unwrap();
+    let per = rec.perspective.as_ref().unwrap();
+    assert!(per.rotation_parallax_px.unwrap() > 10.0 * per.rms_px);
+    assert!(!rec.warnings.iter().any(|w| w.contains("only rotates")));
+}
