@@ -470,10 +470,16 @@ fn dlt_point(g: &Graph, cams: &[f64], p: usize) -> [f64; 4] {
 
 /// Linear triangulation of one point from its views `(P, w)` (`P` row-major 3×4): the
 /// smallest eigenvector of `Σ aᵀa` over the rows `x P₃ − P₁`, `y P₃ − P₂` (Hartley &
-/// Zisserman §12.2). `O(views)`.
-pub(crate) fn dlt_views<'a>(views: impl Iterator<Item = (&'a [f64], [f64; 2])>) -> [f64; 4] {
+/// Zisserman §12.2), or the second smallest when that reprojects closer. A common centre of
+/// the cameras `C` (`P_f C = 0` for every frame) zeroes every row, so it is the smallest
+/// eigenvector of every track, and it projects nowhere: the projective cameras of a planar
+/// scene can drift towards one (a plane's views are also those of a camera turning about
+/// its centre), and every track's point would be that centre. `O(views)`.
+pub(crate) fn dlt_views<'a>(
+    views: impl Iterator<Item = (&'a [f64], [f64; 2])> + Clone,
+) -> [f64; 4] {
     let mut a = Matrix4::<f64>::zeros();
-    for (c, w) in views {
+    for (c, w) in views.clone() {
         for (row, wk) in [(0usize, w[0]), (4, w[1])] {
             let v = Vector4::new(
                 wk * c[8] - c[row],
@@ -485,9 +491,34 @@ pub(crate) fn dlt_views<'a>(views: impl Iterator<Item = (&'a [f64], [f64; 2])>) 
         }
     }
     let e = SymmetricEigen::new(a);
-    let k = e.eigenvalues.imin();
-    let x = e.eigenvectors.column(k);
-    [x[0], x[1], x[2], x[3]]
+    let mut order = [0usize, 1, 2, 3];
+    order.sort_by(|&i, &j| e.eigenvalues[i].total_cmp(&e.eigenvalues[j]));
+    let candidate = |k: usize| {
+        let x = e.eigenvectors.column(k);
+        [x[0], x[1], x[2], x[3]]
+    };
+    // Squared reprojection error in the views' (normalised) units; infinite when a view
+    // sees the point at depth 0.
+    let error = |x: &[f64; 4]| {
+        views
+            .clone()
+            .map(|(c, w)| {
+                let c: &[f64; 12] = c.try_into().unwrap_or(&[0.0; 12]);
+                let q = project(c, x);
+                (q[0] - w[0]).powi(2) + (q[1] - w[1]).powi(2)
+            })
+            .fold(
+                0.0,
+                |s, d| if d.is_finite() { s + d } else { f64::INFINITY },
+            )
+    };
+    let first = candidate(order[0]);
+    let second = candidate(order[1]);
+    if error(&second) < error(&first) {
+        second
+    } else {
+        first
+    }
 }
 
 /// Checks that a projective model is determined by the observations: at least 2 frames,
