@@ -2320,7 +2320,8 @@ pub fn projective_evidence(
     }
     let kept = Measurements::new(sub.w.clone(), visible);
     let points = model.triangulate(&kept);
-    let (mut rss_own, mut rss_proj, mut dof) = (0.0, 0.0, 0.0);
+    // Per track: (ν, r²_own, r²_P).
+    let mut fits: Vec<(f64, f64, f64)> = Vec::with_capacity(n);
     for (i, x) in points.iter().enumerate() {
         let Some(o) = own.track_fit(&object.model, i) else {
             continue;
@@ -2336,17 +2337,29 @@ pub fn projective_evidence(
             .sum();
         let r2_proj = crate::robust::subspace::trimmed_r2(ss, k, kk);
         let r2_own = (o.rms * o.rms).max(1e-24);
-        let nu = fit_dof(&o);
-        dof += nu;
-        rss_own += nu * r2_own;
         // A track the cameras cannot triangulate counts as 9 times its own residual (3σ),
         // as in `other_objects`.
-        rss_proj += nu
-            * if r2_proj.is_finite() {
-                r2_proj
-            } else {
-                9.0 * r2_own
-            };
+        let r2_proj = if r2_proj.is_finite() {
+            r2_proj
+        } else {
+            9.0 * r2_own
+        };
+        fits.push((fit_dof(&o), r2_own, r2_proj));
+    }
+    // Only the tracks the object's own subspace explains are evidence: within 3 times the
+    // group's median RMS under it. A track neither model explains (an outlier track that
+    // joined the group, as the nearest of two poor fits) would otherwise count for the
+    // model with more freedom: a planar background's rejected tracks with 10 % random
+    // tracks among them were kept out as an "object" of 69 tracks (gain 2 732 against a
+    // penalty of 1 259), 55 of them on the plane.
+    let mut own_r2: Vec<f64> = fits.iter().map(|f| f.1).collect();
+    own_r2.sort_by(f64::total_cmp);
+    let limit = 9.0 * own_r2.get(own_r2.len() / 2).copied().unwrap_or(0.0);
+    let (mut rss_own, mut rss_proj, mut dof) = (0.0, 0.0, 0.0);
+    for &(nu, r2_own, r2_proj) in fits.iter().filter(|f| f.1 <= limit) {
+        dof += nu;
+        rss_own += nu * r2_own;
+        rss_proj += nu * r2_proj;
     }
     ObjectEvidence::of(dof, rss_proj, rss_own, log_scalars(meas), &object.model)
 }
