@@ -728,48 +728,52 @@ fn a_camera_that_only_rotates_is_reported() {
 #[test]
 fn a_planar_scene_with_outliers_keeps_its_tracks() {
     use rank3::synth::Motion;
-    let s = generate(&SynthConfig {
-        camera: CameraModel::Perspective,
-        shape: Shape::Plane,
-        motion: Motion::Turntable,
-        frames: 20,
-        points: 150,
-        noise: 0.5,
-        missing: 0.3,
-        outliers: 0.1,
-        gross: 0.01,
-        focal: Some(500.0),
-        distance: 2.5,
-        seed: 0,
-        ..SynthConfig::default()
-    })
-    .unwrap();
-    let mut cfg = Config {
-        camera: CameraModel::Auto,
-        ..Config::default()
-    };
-    cfg.perspective.intrinsics.image_size = Some([641, 481]);
-    let rec = Reconstruction::from_tracks(&s.table, &cfg).unwrap();
-    assert_eq!(rec.camera_model, CameraModel::Perspective);
-    let is_outlier = |p: usize| s.outlier_tracks[p].is_some();
-    let n_outliers = (0..s.outlier_tracks.len())
-        .filter(|&p| is_outlier(p))
-        .count();
-    let lost = rec
-        .outlier_tracks
-        .iter()
-        .filter(|&&p| !is_outlier(p))
-        .count();
-    let caught = rec
-        .outlier_tracks
-        .iter()
-        .filter(|&&p| is_outlier(p))
-        .count();
-    assert!(lost <= 3, "{lost} of the plane's tracks rejected");
-    assert!(
-        caught + 2 >= n_outliers,
-        "{caught} of {n_outliers} outlier tracks rejected"
-    );
-    let per = rec.perspective.as_ref().unwrap();
-    assert!((per.intrinsics.focal_px - 500.0).abs() < 25.0);
+    // Seed 0 lost 58 of its 135 tracks before the evidence was limited to the tracks the
+    // group's own motion explains, seed 2 lost 70 before each track's weight was capped.
+    for seed in [0, 2] {
+        let s = generate(&SynthConfig {
+            camera: CameraModel::Perspective,
+            shape: Shape::Plane,
+            motion: Motion::Turntable,
+            frames: 20,
+            points: 150,
+            noise: 0.5,
+            missing: 0.3,
+            outliers: 0.1,
+            gross: 0.01,
+            focal: Some(500.0),
+            distance: 2.5,
+            seed,
+            ..SynthConfig::default()
+        })
+        .unwrap();
+        let mut cfg = Config {
+            camera: CameraModel::Auto,
+            ..Config::default()
+        };
+        cfg.perspective.intrinsics.image_size = Some([641, 481]);
+        let rec = Reconstruction::from_tracks(&s.table, &cfg).unwrap();
+        assert_eq!(rec.camera_model, CameraModel::Perspective);
+        let is_outlier = |p: usize| s.outlier_tracks[p].is_some();
+        let n_outliers = (0..s.outlier_tracks.len())
+            .filter(|&p| is_outlier(p))
+            .count();
+        let lost = rec
+            .outlier_tracks
+            .iter()
+            .filter(|&&p| !is_outlier(p))
+            .count();
+        let caught = rec
+            .outlier_tracks
+            .iter()
+            .filter(|&&p| is_outlier(p))
+            .count();
+        assert!(lost <= 3, "{lost} of the plane's tracks rejected");
+        assert!(
+            caught + 2 >= n_outliers,
+            "{caught} of {n_outliers} outlier tracks rejected"
+        );
+        let per = rec.perspective.as_ref().unwrap();
+        assert!((per.intrinsics.focal_px - 500.0).abs() < 25.0);
+    }
 }
