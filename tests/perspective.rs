@@ -441,8 +441,8 @@ fn start_rms_is_large(
 }
 
 /// `PerspectiveConfig::accept_at_noise`: where the screened self-calibration is within the
-/// noise of the projective fit, the six starts lifted from the affine model are neither
-/// built nor screened, and the adjustment ends at the optimum the full screening reaches;
+/// noise of the projective fit, the six starts lifted from the affine model and the planar
+/// start are neither built nor screened, and the adjustment ends at the optimum the full screening reaches;
 /// where it is not (five screening iterations leave it at 1.2 px on the strong-perspective
 /// scene, noise 0.5 px), every start is screened as before.
 #[test]
@@ -459,13 +459,14 @@ fn an_accepted_self_calibration_ends_where_the_full_screening_does() {
         let off = Reconstruction::from_tracks(&s.table, &full).unwrap();
         let (pa, pb) = (on.perspective.unwrap(), off.perspective.unwrap());
         let case = format!("distance {distance}, missing {missing}, seed {seed}");
-        assert_eq!(pb.starts.len(), 7, "{case}");
+        // Self-calibration, 3 focal lengths × 2 mirror images of the affine model, the plane.
+        assert_eq!(pb.starts.len(), 8, "{case}");
         if accepted {
             let kinds: Vec<&str> = pa.starts.iter().map(|r| r.kind).collect();
             assert_eq!(kinds, ["self-calibration"], "{case}");
             assert!(pa.starts[0].chosen, "{case}");
         } else {
-            assert_eq!(pa.starts.len(), 7, "{case}");
+            assert_eq!(pa.starts.len(), 8, "{case}");
         }
         assert!(
             (on.rms_px - off.rms_px).abs() <= 1e-9 * off.rms_px,
@@ -508,8 +509,8 @@ fn starts_screened_on_a_subset_end_where_the_whole_tables_screening_does() {
         whole.perspective.as_ref().unwrap(),
     );
     let (nf, np) = (whole.kept_frames.len(), whole.kept_tracks.len());
-    assert_eq!(ps.starts.len(), 7);
-    assert_eq!(pw.starts.len(), 7);
+    assert_eq!(ps.starts.len(), 8);
+    assert_eq!(pw.starts.len(), 8);
     for (a, b) in ps.starts.iter().zip(&pw.starts) {
         assert_eq!(
             (a.screen_frames, b.screen_frames, b.screen_tracks),
@@ -728,52 +729,52 @@ fn a_camera_that_only_rotates_is_reported() {
 #[test]
 fn a_planar_scene_with_outliers_keeps_its_tracks() {
     use rank3::synth::Motion;
-    // Seed 0 lost 58 of its 135 tracks before the evidence was limited to the tracks the
-    // group's own motion explains, seed 2 lost 70 before each track's weight was capped.
-    for seed in [0, 2] {
-        let s = generate(&SynthConfig {
-            camera: CameraModel::Perspective,
-            shape: Shape::Plane,
-            motion: Motion::Turntable,
-            frames: 20,
-            points: 150,
-            noise: 0.5,
-            missing: 0.3,
-            outliers: 0.1,
-            gross: 0.01,
-            focal: Some(500.0),
-            distance: 2.5,
-            seed,
-            ..SynthConfig::default()
-        })
-        .unwrap();
-        let mut cfg = Config {
-            camera: CameraModel::Auto,
-            ..Config::default()
-        };
-        cfg.perspective.intrinsics.image_size = Some([641, 481]);
-        let rec = Reconstruction::from_tracks(&s.table, &cfg).unwrap();
-        assert_eq!(rec.camera_model, CameraModel::Perspective);
-        let is_outlier = |p: usize| s.outlier_tracks[p].is_some();
-        let n_outliers = (0..s.outlier_tracks.len())
-            .filter(|&p| is_outlier(p))
-            .count();
-        let lost = rec
-            .outlier_tracks
-            .iter()
-            .filter(|&&p| !is_outlier(p))
-            .count();
-        let caught = rec
-            .outlier_tracks
-            .iter()
-            .filter(|&&p| is_outlier(p))
-            .count();
-        assert!(lost <= 3, "{lost} of the plane's tracks rejected");
-        assert!(
-            caught + 2 >= n_outliers,
-            "{caught} of {n_outliers} outlier tracks rejected"
-        );
-        let per = rec.perspective.as_ref().unwrap();
-        assert!((per.intrinsics.focal_px - 500.0).abs() < 25.0);
-    }
+    // Seed 2 lost 70 of its 135 tracks before the evidence was limited to the tracks the
+    // group's own motion explains and each track's weight capped, 55 with the first alone
+    // (seed 0: 58 before either, none since).
+    let seed = 2;
+    let s = generate(&SynthConfig {
+        camera: CameraModel::Perspective,
+        shape: Shape::Plane,
+        motion: Motion::Turntable,
+        frames: 20,
+        points: 150,
+        noise: 0.5,
+        missing: 0.3,
+        outliers: 0.1,
+        gross: 0.01,
+        focal: Some(500.0),
+        distance: 2.5,
+        seed,
+        ..SynthConfig::default()
+    })
+    .unwrap();
+    let mut cfg = Config {
+        camera: CameraModel::Auto,
+        ..Config::default()
+    };
+    cfg.perspective.intrinsics.image_size = Some([641, 481]);
+    let rec = Reconstruction::from_tracks(&s.table, &cfg).unwrap();
+    assert_eq!(rec.camera_model, CameraModel::Perspective);
+    let is_outlier = |p: usize| s.outlier_tracks[p].is_some();
+    let n_outliers = (0..s.outlier_tracks.len())
+        .filter(|&p| is_outlier(p))
+        .count();
+    let lost = rec
+        .outlier_tracks
+        .iter()
+        .filter(|&&p| !is_outlier(p))
+        .count();
+    let caught = rec
+        .outlier_tracks
+        .iter()
+        .filter(|&&p| is_outlier(p))
+        .count();
+    assert!(lost <= 3, "{lost} of the plane's tracks rejected");
+    assert!(
+        caught + 2 >= n_outliers,
+        "{caught} of {n_outliers} outlier tracks rejected"
+    );
+    let per = rec.perspective.as_ref().unwrap();
+    assert!((per.intrinsics.focal_px - 500.0).abs() < 25.0);
 }

@@ -115,14 +115,9 @@ pub fn start(
     for &p in &tracks_of[r] {
         in_r[p] = true;
     }
-    let partners: Vec<usize> = (0..nf)
-        .filter(|&g| g != r && tracks_of[g].iter().filter(|&&p| in_r[p]).count() >= MIN_SHARED)
-        .collect();
-    let step = partners.len().div_ceil(MAX_PAIRS).max(1);
     let mut homographies = Vec::new();
     let mut transfer = Vec::new();
-    for &g in partners.iter().step_by(step) {
-        let shared: Vec<usize> = tracks_of[g].iter().copied().filter(|&p| in_r[p]).collect();
+    for (g, shared) in partners(&tracks_of, r, &in_r) {
         let src: Vec<[f64; 2]> = shared.iter().map(|&p| pos(r, p)).collect();
         let dst: Vec<[f64; 2]> = shared.iter().map(|&p| pos(g, p)).collect();
         let Some(h) = homography(&src, &dst) else {
@@ -157,6 +152,25 @@ pub fn start(
     };
     let model = register(meas, &tracks_of, &frames_of, r, focal, normal, &pos, c)?;
     Some((model, calib))
+}
+
+/// The frames sharing at least [`MIN_SHARED`] tracks with frame `r` (`in_r[p]`: `r` sees
+/// track `p`), at most [`MAX_PAIRS`] of them spread evenly, each with the tracks it shares.
+/// `O(n_obs)`.
+fn partners(tracks_of: &[Vec<usize>], r: usize, in_r: &[bool]) -> Vec<(usize, Vec<usize>)> {
+    let all: Vec<usize> = (0..tracks_of.len())
+        .filter(|&g| g != r && tracks_of[g].iter().filter(|&&p| in_r[p]).count() >= MIN_SHARED)
+        .collect();
+    let step = all.len().div_ceil(MAX_PAIRS).max(1);
+    all.into_iter()
+        .step_by(step)
+        .map(|g| {
+            (
+                g,
+                tracks_of[g].iter().copied().filter(|&p| in_r[p]).collect(),
+            )
+        })
+        .collect()
 }
 
 /// Hartley's normalising similarity of 2D points: centroid to the origin, mean distance
@@ -548,12 +562,7 @@ pub fn rotation_parallax_px(meas: &Measurements, model: &PerspectiveModel) -> Op
         for &p in &tracks_of[r] {
             seen[p] = true;
         }
-        let partners: Vec<usize> = (0..nf)
-            .filter(|&g| g != r && tracks_of[g].iter().filter(|&&p| seen[p]).count() >= MIN_SHARED)
-            .collect();
-        let step = partners.len().div_ceil(MAX_PAIRS).max(1);
-        for &g in partners.iter().step_by(step) {
-            let shared: Vec<usize> = tracks_of[g].iter().copied().filter(|&p| seen[p]).collect();
+        for (g, shared) in partners(&tracks_of, r, &seen) {
             let mut h = Matrix3::zeros();
             for &p in &shared {
                 h += ray(g, p) * ray(r, p).transpose();
