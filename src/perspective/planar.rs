@@ -111,6 +111,9 @@ pub fn start(
     });
     // The reference: the frame seeing the most tracks.
     let r = (0..nf).max_by_key(|&f| (tracks_of[f].len(), std::cmp::Reverse(f)))?;
+    if tracks_of[r].len() < MIN_SHARED {
+        return None;
+    }
     let mut in_r = vec![false; np];
     for &p in &tracks_of[r] {
         in_r[p] = true;
