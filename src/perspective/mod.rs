@@ -524,7 +524,8 @@ pub struct StartReport {
 ///
 /// Cost: the self-calibration `O(F + N)`, then `O(n_obs)` per adjustment iteration:
 /// [`PerspectiveConfig::screen_iterations`] per screened start (1, or 1 + 2 × the focal
-/// grid's length) on the screened observations (bounded on a long sequence), then the
+/// grid's length + 1 for the planar start, whose homographies and grid cost `O(n_obs)` plus
+/// a constant) on the screened observations (bounded on a long sequence), then the
 /// final adjustment's.
 pub fn fit(
     meas: &Measurements,
