@@ -314,21 +314,7 @@ impl BundleModel for ScaledOrthographic {
     }
 
     fn normalize_cam(&self, cam: &mut [f64]) {
-        let m = Matrix3::from_row_slice(&cam[..9]);
-        let svd = m.svd(true, true);
-        if let (Some(u), Some(vt)) = (svd.u, svd.v_t) {
-            let mut r = u * vt;
-            if r.determinant() < 0.0 {
-                let mut d = Matrix3::identity();
-                d[(2, 2)] = -1.0;
-                r = u * d * vt;
-            }
-            for i in 0..3 {
-                for j in 0..3 {
-                    cam[3 * i + j] = r[(i, j)];
-                }
-            }
-        }
+        crate::perspective::models::orthonormalize(&mut cam[..9]);
     }
 
     /// The similarity gauge `x ↦ c A x + b`: every direction of camera 0, and for camera 1

@@ -669,13 +669,15 @@ pub(crate) fn fit_lazy<'a>(
             ),
             None => within_noise_of_projective(meas, proj, selfcal_rms, cfg, &assumed),
         };
+    // The image's larger side (the normalising scale without the image size): what the
+    // focal lengths tried by the affine and planar starts are multiples of.
+    let side = match cfg.intrinsics.image_size {
+        Some([w, h]) => w.max(h) as f64,
+        None => s,
+    };
     if !accepted && let Some(a) = affine() {
         let a: &MetricModel = &a;
         if a.rotations.len() == nf && a.points.len() == np {
-            let side = match cfg.intrinsics.image_size {
-                Some([w, h]) => w.max(h) as f64,
-                None => s,
-            };
             let focals: Vec<f64> = match cfg.intrinsics.focal_px {
                 Some(f) => vec![f],
                 None => cfg.focal_grid.iter().map(|m| m * side).collect(),
@@ -702,29 +704,25 @@ pub(crate) fn fit_lazy<'a>(
     }
     // The planar start: when the tracks lie on a plane (or the camera only rotates) the
     // other starts are far from the optimum (module `planar`).
-    if !accepted && cfg.planar_start {
-        let side = match cfg.intrinsics.image_size {
-            Some([w, h]) => w.max(h) as f64,
-            None => s,
-        };
-        if let Some((model, calib)) =
+    if !accepted
+        && cfg.planar_start
+        && let Some((model, calib)) =
             planar::start(meas, assumed.principal_point, side, cfg.intrinsics.focal_px)
-        {
-            let from = starts.len();
-            starts.push((
-                StartReport {
-                    kind: "plane",
-                    focal_px: calib.focal_px,
-                    mirrored: false,
-                    rms_px: f64::NAN,
-                    chosen: false,
-                    screen_frames: 0,
-                    screen_tracks: 0,
-                },
-                model,
-            ));
-            screen(&mut starts, from, &mut best, subset.as_ref());
-        }
+    {
+        let from = starts.len();
+        starts.push((
+            StartReport {
+                kind: "plane",
+                focal_px: calib.focal_px,
+                mirrored: false,
+                rms_px: f64::NAN,
+                chosen: false,
+                screen_frames: 0,
+                screen_tracks: 0,
+            },
+            model,
+        ));
+        screen(&mut starts, from, &mut best, subset.as_ref());
     }
     // No start could be adjusted on the subset: the whole table screens them.
     if best.is_none() && subset.is_some() {

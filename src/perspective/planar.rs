@@ -58,7 +58,17 @@
 use nalgebra::{Matrix3, SMatrix, Vector3};
 
 use super::PerspectiveModel;
+use super::models::orthonormalize;
 use crate::Measurements;
+use crate::projective::Normalization;
+
+/// The nearest rotation (polar factor, determinant +1) of `m`: [`orthonormalize`] on its
+/// column-major storage, which is `mᵀ` row by row (the polar factor of `mᵀ` is that of `m`
+/// transposed).
+fn nearest_rotation(mut m: Matrix3<f64>) -> Matrix3<f64> {
+    orthonormalize(m.as_mut_slice());
+    m
+}
 
 /// Frames of the reference's homographies that the calibration uses (spread evenly over
 /// the frames that share enough tracks with it).
@@ -176,20 +186,14 @@ fn partners(tracks_of: &[Vec<usize>], r: usize, in_r: &[bool]) -> Vec<(usize, Ve
         .collect()
 }
 
-/// Hartley's normalising similarity of 2D points: centroid to the origin, mean distance
-/// `√2`.
+/// Hartley's normalising similarity of 2D points ([`Normalization::of_points`]: centroid to
+/// the origin, mean distance `√2`) as a 3×3 matrix.
 fn normaliser(pts: &[[f64; 2]]) -> Matrix3<f64> {
-    let n = pts.len().max(1) as f64;
-    let (mx, my) = pts
-        .iter()
-        .fold((0.0, 0.0), |(x, y), p| (x + p[0] / n, y + p[1] / n));
-    let d = pts
-        .iter()
-        .map(|p| ((p[0] - mx).powi(2) + (p[1] - my).powi(2)).sqrt())
-        .sum::<f64>()
-        / n;
-    let s = if d > 0.0 { 2f64.sqrt() / d } else { 1.0 };
-    Matrix3::new(s, 0.0, -s * mx, 0.0, s, -s * my, 0.0, 0.0, 1.0)
+    let Normalization {
+        centre: [cx, cy],
+        scale: s,
+    } = Normalization::of_points(|| pts.iter().copied());
+    Matrix3::new(s, 0.0, -s * cx, 0.0, s, -s * cy, 0.0, 0.0, 1.0)
 }
 
 /// The homography `x' ≃ H x` of at least 4 point pairs by the normalised DLT (Hartley &
@@ -275,11 +279,9 @@ fn plane_basis(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
 /// tracks' box (centred pixels): the plane seen edge-on, a degenerate family along which
 /// `J` nearly vanishes for small `f`.
 fn objective(hs: &[Matrix3<f64>], corners: &[[f64; 2]], f: f64, n: &Vector3<f64>) -> f64 {
-    let side: Vec<bool> = corners
-        .iter()
-        .map(|x| n.x * x[0] + n.y * x[1] + n.z * f > 0.0)
-        .collect();
-    if side.iter().any(|&s| s != side[0]) {
+    let ahead = |x: &[f64; 2]| n.x * x[0] + n.y * x[1] + n.z * f > 0.0;
+    let first = corners.first().is_some_and(ahead);
+    if corners.iter().any(|x| ahead(x) != first) {
         return f64::INFINITY;
     }
     let (a, b) = plane_basis(n);
@@ -402,14 +404,7 @@ fn pose_from_plane_homography(
         let l = sign * lambda;
         let r1: Vector3<f64> = h1 / l;
         let r2: Vector3<f64> = h2 / l;
-        let m = Matrix3::from_columns(&[r1, r2, r1.cross(&r2)]);
-        let svd = m.svd(true, true);
-        let (u, vt) = (svd.u?, svd.v_t?);
-        let mut q = u * vt;
-        if q.determinant() < 0.0 {
-            let d = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
-            q = u * d * vt;
-        }
+        let q = nearest_rotation(Matrix3::from_columns(&[r1, r2, r1.cross(&r2)]));
         let rot = q * basis.transpose();
         let t = h3 / l - rot * n;
         let front = placed.iter().filter(|(x, _)| (rot * x + t).z > 0.0).count();
@@ -570,12 +565,8 @@ pub fn rotation_parallax_px(meas: &Measurements, model: &PerspectiveModel) -> Op
             for &p in &shared {
                 h += ray(g, p) * ray(r, p).transpose();
             }
-            let svd = h.svd(true, true);
-            let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
-                continue;
-            };
-            let d = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, (u * vt).determinant()));
-            let rot = u * d * vt;
+            // Kabsch: the nearest rotation of `Σ d_g d_rᵀ`.
+            let rot = nearest_rotation(h);
             let mut dist: Vec<f64> = shared
                 .iter()
                 .filter_map(|&p| {
