@@ -752,7 +752,38 @@ fn segment_estimator<R: Rng + ?Sized>(
     if let Some(w) = windows::plan(&ts, cfg) {
         return windows::segment_windows(&ts, &w, cfg, rng, t0);
     }
-    let seg = segment_tracks(&ts, cfg, rng, t0, None)?;
+    segment_whole(&ts, cfg, rng, t0)
+}
+
+/// [`segment_table`] of a table whose tracks are segmented whole: `None` (at the cost of
+/// building the tracks' subspace index only) when the table would be segmented window by
+/// window ([`windows::plan`]: a long sequence of short tracks, whose groups are matched
+/// across windows).
+///
+/// Errors: as [`segment`].
+pub fn segment_table_whole<R: Rng + ?Sized>(
+    table: &crate::TrackTable,
+    cfg: &SegmentConfig,
+    rng: &mut R,
+) -> Result<Option<Segmentation>> {
+    cfg.validate()?;
+    let t0 = Instant::now();
+    let ts = TrackSubspace::from_table(table, &cfg.subspace);
+    if windows::plan(&ts, cfg).is_some() {
+        return Ok(None);
+    }
+    segment_whole(&ts, cfg, rng, t0).map(Some)
+}
+
+/// [`segment_tracks`] of all the tracks at once, with the one-group fallback of
+/// [`Objects::Auto`] when no count is accepted (`cfg` validated; `t0` starts the clock).
+fn segment_whole<R: Rng + ?Sized>(
+    ts: &TrackSubspace,
+    cfg: &SegmentConfig,
+    rng: &mut R,
+    t0: Instant,
+) -> Result<Segmentation> {
+    let seg = segment_tracks(ts, cfg, rng, t0, None)?;
     if !seg.objects.is_empty() || cfg.objects != Objects::Auto {
         return Ok(seg);
     }
@@ -760,7 +791,7 @@ fn segment_estimator<R: Rng + ?Sized>(
         objects: Objects::Count(1),
         ..cfg.clone()
     };
-    match segment_tracks(&ts, &one, rng, t0, None) {
+    match segment_tracks(ts, &one, rng, t0, None) {
         Ok(s1) if !s1.objects.is_empty() => Ok(Segmentation {
             count_rule: CountRule::OneGroupFallback,
             ..s1
@@ -2108,6 +2139,87 @@ pub fn other_objects_seeded<R: Rng + ?Sized>(
         Err(Error::TooFew { .. }) | Err(Error::Degenerate(_)) => return Ok(Vec::new()),
         Err(e) => return Err(e),
     };
+    Ok(judge_groups(
+        meas,
+        main,
+        noise_sigma_px,
+        candidates,
+        &ts,
+        &seg.objects,
+        cfg,
+        rng,
+    ))
+}
+
+/// The groups of a segmentation of the whole table other than the main body's (`groups`,
+/// their tracks indices into `meas`, none of them in `main`'s group), judged against the
+/// main body's subspace `main` as [`other_objects`] judges the groups it finds among its
+/// candidates — without segmenting them again (a few tracks of an object, segmented alone,
+/// can fall below their label cost: Hopkins `two_cranes_g12`'s crane, 17 tracks). Returns
+/// the groups that pass, with the tracks that join them, largest first.
+///
+/// Complexity: O(F·n) for the estimator over the groups' `n` tracks and O(n_obs · groups)
+/// for the comparisons, plus a RANSAC over each group above the noise bound.
+pub fn other_objects_among<R: Rng + ?Sized>(
+    meas: &Measurements,
+    main: &AffineSubspace,
+    noise_sigma_px: f64,
+    groups: &[ObjectGroup],
+    cfg: &SegmentConfig,
+    rng: &mut R,
+) -> Result<Vec<OtherObject>> {
+    cfg.validate()?;
+    let mut candidates: Vec<usize> = groups
+        .iter()
+        .flat_map(|g| g.tracks.iter().copied())
+        .collect();
+    candidates.sort_unstable();
+    candidates.dedup();
+    if candidates.iter().any(|&p| p >= meas.n_points()) {
+        return Err(Error::InvalidConfig {
+            field: "groups",
+            message: format!("a track index is ≥ the {} tracks", meas.n_points()),
+        });
+    }
+    let sub = meas.select_tracks(&candidates);
+    let ts = TrackSubspace::new(&sub, &cfg.subspace);
+    let local: Vec<ObjectGroup> = groups
+        .iter()
+        .map(|g| ObjectGroup {
+            tracks: g
+                .tracks
+                .iter()
+                .map(|p| candidates.binary_search(p).unwrap_or_default())
+                .collect(),
+            ..g.clone()
+        })
+        .collect();
+    Ok(judge_groups(
+        meas,
+        main,
+        noise_sigma_px,
+        &candidates,
+        &ts,
+        &local,
+        cfg,
+        rng,
+    ))
+}
+
+/// The judgement of [`other_objects`] and [`other_objects_among`]: `groups` (tracks as
+/// indices into `candidates`, which index `meas`; `ts` the estimator over the candidates).
+#[allow(clippy::too_many_arguments)]
+fn judge_groups<R: Rng + ?Sized>(
+    meas: &Measurements,
+    main: &AffineSubspace,
+    noise_sigma_px: f64,
+    candidates: &[usize],
+    ts: &TrackSubspace,
+    groups: &[ObjectGroup],
+    cfg: &SegmentConfig,
+    rng: &mut R,
+) -> Vec<OtherObject> {
+    let n_all = meas.n_points();
     let ln_n = log_scalars(meas);
     // The largest noise of a rigid group: `max_group_sigma`, or `max_group_sigma_ratio`
     // times the main body's noise when that is larger.
@@ -2115,7 +2227,7 @@ pub fn other_objects_seeded<R: Rng + ?Sized>(
         .max_group_sigma
         .max(cfg.max_group_sigma_ratio * noise_sigma_px);
     let mut found: Vec<(AffineSubspace, Vec<usize>)> = Vec::new();
-    for g in &seg.objects {
+    for g in groups {
         // A group noisier than a rigid body of this video holds junk (random walks,
         // sliding tracks), possibly around an object: only the rigid consensus of its
         // tracks within `max_sigma` (RANSAC over them) is judged.
@@ -2168,7 +2280,7 @@ pub fn other_objects_seeded<R: Rng + ?Sized>(
         }
     }
     if found.is_empty() {
-        return Ok(Vec::new());
+        return Vec::new();
     }
     // Some of the object's tracks are not in its group: kept whole by the robust pass (the
     // main body explains them to within its threshold, e.g. an object moving slowly
@@ -2214,7 +2326,7 @@ pub fn other_objects_seeded<R: Rng + ?Sized>(
     }
     out.iter_mut().for_each(|g| g.tracks.sort_unstable());
     out.sort_by_key(|g| std::cmp::Reverse(g.tracks.len()));
-    Ok(out)
+    out
 }
 
 /// Another rigid object found by [`other_objects`]: its tracks (indices into the table
