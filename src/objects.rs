@@ -186,6 +186,13 @@ pub fn reconstruct_objects(
 ) -> Result<MultiBody> {
     let mut rng = StdRng::seed_from_u64(config.seed);
     let segmentation = segment_table(table, seg, &mut rng)?;
+    // Each object's tracks were just grouped: its pipeline does not segment them again
+    // (its robust pass still searches for other objects among the tracks it rejects).
+    let mut config = config.clone();
+    if let Some(rc) = config.robust.as_mut() {
+        rc.segment_first = false;
+    }
+    let config = &config;
     let all_frames: Vec<usize> = (0..table.n_frames()).collect();
     let unscored = unscored_in_the_only_object(&segmentation);
     let objects = segmentation

@@ -223,13 +223,15 @@ pub struct RobustReport {
     /// Flagged entries as (frame, track) indices into the input table.
     #[serde(skip)]
     pub flagged_indices: Vec<(usize, usize)>,
-    /// Rigid groups the affine pass saw: 1 (the body reconstructed) plus the other rigid
-    /// objects found among the tracks it rejected or flagged
-    /// ([`crate::segment::other_objects`]; 1 when `separate_objects` is off or the pass
-    /// found no majority).
+    /// Rigid groups seen: 1 (the body reconstructed) plus the other rigid objects, found
+    /// by segmenting the kept tracks before the robust pass ([`crate::segment`]) and among
+    /// the tracks the pass rejected or flagged ([`crate::segment::other_objects`]); 1 when
+    /// `separate_objects` is off. A group the projective verdict mostly readmits (a part
+    /// of the body seen in perspective) is not counted.
     pub rigid_groups_seen: usize,
-    /// Tracks the affine pass had kept (with flagged entries) that belong to another rigid
-    /// object, rejected whole (they are in `outlier_tracks`).
+    /// Tracks of the other rigid objects rejected whole (they are in `outlier_tracks`):
+    /// every track of a group the segmentation found before the pass, and those the pass
+    /// had kept (with flagged entries) of a group found after it.
     pub other_object_tracks: usize,
     pub seconds: f64,
 }
@@ -1391,15 +1393,228 @@ struct Selection {
     report: Option<RobustReport>,
 }
 
+impl Selection {
+    /// From a selection of the tracks `bodies.keep` (indices into them) to one of the
+    /// kept table's tracks: the other bodies' tracks rejected, their groups first in
+    /// `other_groups`.
+    fn lift(&mut self, bodies: &OtherBodies) {
+        let keep = &bodies.keep;
+        let mut inlier = vec![false; bodies.n_tracks];
+        for (i, &p) in keep.iter().enumerate() {
+            inlier[p] = self.inlier[i];
+        }
+        self.inlier = inlier;
+        // `keep` increases: the entries' order is kept.
+        self.flagged.iter_mut().for_each(|e| e.1 = keep[e.1]);
+        for g in &mut self.other_groups {
+            g.tracks.iter_mut().for_each(|p| *p = keep[*p]);
+        }
+        self.other_groups
+            .splice(0..0, bodies.groups.iter().cloned());
+    }
+}
+
+/// Rigid bodies besides the scene, found by segmenting the kept tracks before the robust
+/// pass ([`other_bodies`]).
+struct OtherBodies {
+    /// The tracks the robust pass judges (increasing): the largest group's, and those no
+    /// group holds (outliers, tracks too short to be scored).
+    keep: Vec<usize>,
+    /// The other groups, largest first.
+    groups: Vec<crate::segment::OtherObject>,
+    /// The tracks the segmentation labelled outliers (in `keep`; increasing).
+    outliers: Vec<usize>,
+    /// Number of kept tracks.
+    n_tracks: usize,
+}
+
+/// The kept tracks' rigid bodies ([`crate::segment::segment_table_whole`], the number of
+/// groups found, [`crate::segment::Objects::Auto`]). The largest group is the scene; the
+/// others are searched for among the tracks outside it and judged against the scene's
+/// subspace ([`crate::segment::other_objects`]; a member the scene explains as well stays
+/// with the scene), and the bodies found are those whose
+/// tracks the robust pass rejects whole, whatever part of them the scene's cameras happen
+/// to explain (a second body was before kept in part with entries flagged as gross errors
+/// one by one: Hopkins `2RT3RC_g12`, 173 entries on its other bodies' tracks; or the robust
+/// pass's consensus settled on the smaller body, `truck1`; docs/results.md). `None` with
+/// fewer than two groups, groups less separated than
+/// [`crate::segment::SegmentConfig::split_separation`] (the median `r_other / r_own` of the
+/// least separated pair), no group that passes the judgement, fewer tracks than two groups
+/// need, or a table segmented window by window (a long sequence of short tracks: the robust
+/// pass's own search for other objects then runs alone, as its cost follows the
+/// observations). Its own RNG (from `config.seed`), so that the robust pass's draws do not
+/// change when no other body is found. Cost: the segmentation's ([`crate::segment`]), plus
+/// that of [`crate::segment::other_objects`] on the tracks outside the scene's group; a
+/// failed segmentation (too few tracks to score) is no body.
+fn other_bodies(table: &TrackTable, meas: &Measurements, config: &Config) -> Option<OtherBodies> {
+    let cfg = crate::segment::SegmentConfig {
+        image_area: config
+            .perspective
+            .intrinsics
+            .image_size
+            .map(|[w, h]| w as f64 * h as f64),
+        // No perspective merge test: its fits were most of the cost (the dinosaur: 0.1 s
+        // without them, up to 2.3 s with), and the separation rule below leaves the pieces
+        // it would join to the robust pass.
+        merge_ratio: 0.0,
+        ..Default::default()
+    };
+    let n = table.n_tracks();
+    if n < 2 * cfg.min_group_tracks {
+        return None;
+    }
+    let mut rng = rand::rngs::StdRng::seed_from_u64(config.seed ^ 0x0b0d_1e5);
+    let seg = crate::segment::segment_table_whole(table, &cfg, &mut rng)
+        .ok()
+        .flatten()?;
+    // Groups told apart only weakly are pieces of one body seen in perspective, which the
+    // affine subspaces cut (the dinosaur, one rigid body: 2 or 3 groups by the seed, least
+    // separated pair 4.5–7.1; every true split of the Hopkins files ≥ 12.1, docs/results.md).
+    // They are left to the robust pass, which judges them with the scene's own cameras.
+    if seg.objects.len() < 2 || !seg.separation.is_some_and(|q| q >= cfg.split_separation) {
+        return None;
+    }
+    // Each other group is then judged against the scene's subspace as the search after the
+    // pass judges the groups it finds ([`crate::segment::other_objects_among`]: the
+    // likelihood ratio of the two models, a group noisier than a rigid body by its rigid
+    // consensus, and the tracks an object explains better than the scene joining it): a
+    // group of the scene's tracks that carry gross entries, with a few junk tracks, is no
+    // body.
+    let scene = &seg.objects[0];
+    let search = crate::segment::SegmentConfig::default();
+    let groups = crate::segment::other_objects_among(
+        meas,
+        &scene.model,
+        scene.sigma,
+        &seg.objects[1..],
+        &search,
+        &mut rng,
+    )
+    .ok()?;
+    // A track the scene's subspace explains as well as its group's stays with the scene, for
+    // the robust pass to judge: a body moving close to the scene's motion takes some of the
+    // scene's tracks into its group, where nothing tells the two apart (the synthetic scene
+    // above, whose second object's subspace fits 6 of the scene's tracks within 0.55–0.83
+    // px, the scene's within 0.41–0.66). The margin is the search's own for a track to join
+    // an object: `ν ln(r²_scene / r²_own) > 2 ln(2 n_obs)`.
+    let ts = crate::robust::subspace::TrackSubspace::new(meas, &search.subspace);
+    let ln_n = ((2 * meas.n_observed()).max(2) as f64).ln();
+    let groups: Vec<crate::segment::OtherObject> = groups
+        .into_iter()
+        .map(|mut g| {
+            g.tracks.retain(|&p| {
+                let (Some(o), Some(m)) = (ts.track_fit(&g.model, p), ts.track_fit(&scene.model, p))
+                else {
+                    return true;
+                };
+                let nu = (2.0 * o.kept as f64 - 3.0).max(0.0);
+                nu * (m.rms * m.rms / (o.rms * o.rms).max(1e-24)).ln() > 2.0 * ln_n
+            });
+            g
+        })
+        .filter(|g| g.tracks.len() >= search.min_group_tracks)
+        .collect();
+    if groups.is_empty() {
+        return None;
+    }
+    let mut other = vec![false; n];
+    groups
+        .iter()
+        .flat_map(|g| &g.tracks)
+        .for_each(|&p| other[p] = true);
+    Some(OtherBodies {
+        keep: (0..n).filter(|&p| !other[p]).collect(),
+        groups,
+        outliers: (0..n)
+            .filter(|&p| !other[p] && seg.labels[p] == crate::segment::Label::Outlier)
+            .collect(),
+        n_tracks: n,
+    })
+}
+
+/// The selection when other bodies were found ([`other_bodies`]) but the robust pass could
+/// not judge the scene's tracks (too few of them, or no non-degenerate sample: a scene
+/// moving in a plane, Hopkins `1R2RC_g23`): the other bodies' tracks and those the
+/// segmentation labelled outliers are rejected whole, the scene's are all kept, and the
+/// report says so (its noise and thresholds are NaN: nothing estimated them).
+fn bodies_only(
+    sel: Selection,
+    bodies: &OtherBodies,
+    kept: &Kept<'_>,
+    iterations: usize,
+    counts: Vec<usize>,
+    t0: Instant,
+) -> Selection {
+    let mut sel = sel;
+    sel.lift(bodies);
+    bodies.outliers.iter().for_each(|&p| sel.inlier[p] = false);
+    sel.report = Some(RobustReport::of_selection(
+        kept,
+        &sel,
+        [f64::NAN; 3],
+        iterations,
+        counts,
+        bodies.groups.iter().map(|g| g.tracks.len()).sum(),
+        t0,
+    ));
+    sel
+}
+
+impl RobustReport {
+    /// The report of the selection `sel` of the kept tracks: `[σ, τ, entry threshold]` of
+    /// the pass, its iterations and inliers per iteration, the other objects' tracks.
+    fn of_selection(
+        kept: &Kept<'_>,
+        sel: &Selection,
+        [noise_sigma_px, threshold_px, entry_threshold_px]: [f64; 3],
+        iterations: usize,
+        counts: Vec<usize>,
+        other_object_tracks: usize,
+        t0: Instant,
+    ) -> Self {
+        let mut report = RobustReport {
+            outlier_tracks: Vec::new(),
+            flagged_entries: Vec::new(),
+            n_inlier_tracks: 0,
+            n_outlier_tracks: 0,
+            n_flagged_entries: 0,
+            noise_sigma_px,
+            threshold_px,
+            entry_threshold_px,
+            iterations,
+            projective: None,
+            inliers_per_iteration: counts,
+            flagged_indices: Vec::new(),
+            rigid_groups_seen: 1 + sel.other_groups.len(),
+            other_object_tracks,
+            seconds: t0.elapsed().as_secs_f64(),
+        };
+        report.update(
+            kept.table,
+            &kept.frames,
+            &kept.tracks,
+            &sel.inlier,
+            &sel.flagged,
+        );
+        report
+    }
+}
+
 /// Stage 2, the affine robust pass ([`crate::robust`]): RANSAC over rigid hypotheses, the
-/// trimmed track test and the gross-entry flags, then other rigid objects among the
-/// rejected tracks and those with an ambiguous flag ([`crate::segment::other_objects`]),
-/// and among all the kept tracks when many pass the track test only by its floor,
-/// rejected whole. Without a
-/// rigid majority the affine cameras stop ([`Error::NoRigidMajority`]); the projective ones
-/// go on with every track, for the projective verdict to judge. Cost: the robust pass's
-/// (see [`crate::robust`]). Also returns the kept table's dense measurements, which the
-/// pass builds, for the fit to reuse when it keeps the whole table.
+/// trimmed track test and the gross-entry flags. When the pass leaves a sign of another
+/// body (no rigid majority, or two groups' worth of tracks rejected, flagged or kept only
+/// by the floor) and the kept tracks segment into several rigid bodies
+/// ([`other_bodies`]), the pass runs again on the scene's tracks only and the other bodies'
+/// tracks are rejected whole (a scene the pass cannot judge — no non-degenerate sample — is
+/// kept whole: [`bodies_only`]). Otherwise other rigid objects are searched for after the
+/// pass, among the rejected tracks and those with an ambiguous flag
+/// ([`crate::segment::other_objects`]), and among all the kept tracks when many pass the
+/// track test only by its floor, and rejected whole. Without a rigid majority the affine
+/// cameras stop ([`Error::NoRigidMajority`]); the projective ones go on with every track,
+/// for the projective verdict to judge. Cost: the robust pass's ([`crate::robust`]); with
+/// signs of another body, plus the segmentation's ([`crate::segment`]) and, with bodies
+/// found, a second pass on the scene's tracks. Also returns the kept table's dense
+/// measurements, which the pass builds, for the fit to reuse when it keeps the whole table.
 fn robust_stage(
     kept: &Kept<'_>,
     config: &Config,
@@ -1417,28 +1632,93 @@ fn robust_stage(
         return Ok((sel, None));
     };
     let meas_all = kept.table.measurements();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(config.seed);
     let t0 = Instant::now();
+    let pass = |meas: &Measurements, counts: &mut Vec<usize>, timer: &mut Timer<'_>| {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(config.seed);
+        counts.clear();
+        let r = timer.run("robust", |obs| {
+            let mut capture = InlierCapture { inner: obs, counts };
+            robust::robust_filter_observed(meas, rc, &mut rng, &mut capture)
+        });
+        // The search for other objects after the pass draws on from where it stopped.
+        (r, rng)
+    };
     let mut counts = Vec::new();
-    let r = timer.run("robust", |obs| {
-        let mut capture = InlierCapture {
-            inner: obs,
-            counts: &mut counts,
-        };
-        robust::robust_filter_observed(&meas_all, rc, &mut rng, &mut capture)
-    });
+    let (r_all, rng_all) = pass(&meas_all, &mut counts, timer);
+    // Other rigid bodies: when the pass over every track leaves a sign of one (no rigid
+    // majority, or at least two groups' worth of tracks rejected, with a flagged entry or
+    // kept only by the track floor; Hopkins `two_cranes_g12`'s object is kept whole with 52
+    // flags far off, none ambiguous), the kept tracks are segmented, and when
+    // they hold other bodies ([`other_bodies`]) the pass runs again on the scene's tracks
+    // (and those no body explains) only, the other bodies' tracks rejected whole, however
+    // well their entries happen to fit the scene's cameras. A clean table is not segmented
+    // (its cost is the pass's alone).
+    let signs = |r: &robust::RobustResult| {
+        if !matches!(r.verdict, robust::Verdict::RigidMajority { .. }) {
+            return true;
+        }
+        let mut suspect = vec![false; r.inlier_tracks.len()];
+        r.flagged_entries
+            .iter()
+            .for_each(|&(_, p)| suspect[p] = true);
+        (0..suspect.len()).for_each(|p| {
+            suspect[p] |= !r.inlier_tracks[p] || r.floor_kept.get(p).is_some_and(|&f| f)
+        });
+        let suspect = suspect.iter().filter(|&&b| b).count();
+        suspect >= 2 * crate::segment::SegmentConfig::default().min_group_tracks
+    };
+    let bodies = match &r_all {
+        Ok(r) if rc.separate_objects && rc.segment_first && signs(r) => timer
+            .run("other-bodies", |_| {
+                other_bodies(kept.table, &meas_all, config)
+            }),
+        _ => None,
+    };
+    let sub;
+    let (meas, r, mut rng) = match &bodies {
+        Some(b) => {
+            sub = meas_all.select_tracks(&b.keep);
+            let (r, rng) = pass(&sub, &mut counts, timer);
+            (&sub, r, rng)
+        }
+        None => (&meas_all, r_all, rng_all),
+    };
+    let n = meas.n_points();
+    sel.inlier = vec![true; n];
+    let lift = |mut sel: Selection| {
+        if let Some(b) = &bodies {
+            sel.lift(b);
+        }
+        sel
+    };
+    let unjudged = |sel: Selection, iterations: usize, counts: Vec<usize>| match &bodies {
+        Some(b) => bodies_only(sel, b, kept, iterations, counts, t0),
+        None => sel,
+    };
     // A table too small (or too sparse) for the robust pass to judge is fitted whole: it
     // says nothing against the data, and the fit's own checks still apply.
     let skipped = |why: String, warnings: &mut Vec<String>| {
-        warnings.push(format!(
-            "robust pass skipped: {why}; every track is fitted (an outlier among them cannot \
-             be detected)"
-        ));
+        warnings.push(match &bodies {
+            None => format!(
+                "robust pass skipped: {why}; every track is fitted (an outlier among them \
+                 cannot be detected)"
+            ),
+            Some(b) => format!(
+                "robust pass skipped on the scene's tracks: {why}; the {} tracks of {} other \
+                 rigid bod{} the segmentation found and its {} outlier track(s) are rejected, \
+                 the scene's {} tracks all fitted (an outlier among them cannot be detected)",
+                b.groups.iter().map(|g| g.tracks.len()).sum::<usize>(),
+                b.groups.len(),
+                if b.groups.len() == 1 { "y" } else { "ies" },
+                b.outliers.len(),
+                b.keep.len() - b.outliers.len()
+            ),
+        });
     };
     let r = match r {
         Err(e @ Error::TooFew { .. }) => {
             skipped(e.to_string(), warnings);
-            return Ok((sel, Some(meas_all)));
+            return Ok((unjudged(sel, 0, counts), Some(meas_all)));
         }
         r => r?,
     };
@@ -1454,11 +1734,11 @@ fn robust_stage(
     {
         skipped(
             "no non-degenerate sample of 4 tracks could be drawn or fitted (too few tracks \
-             share frames)"
+             share frames, or the tracks span fewer than 3 dimensions: motion in a plane)"
                 .into(),
             warnings,
         );
-        return Ok((sel, Some(meas_all)));
+        return Ok((unjudged(sel, r.iterations, counts), Some(meas_all)));
     }
     if let robust::Verdict::NoRigidMajority {
         reason,
@@ -1486,7 +1766,12 @@ fn robust_stage(
     } else {
         sel.inlier.clone_from(&r.inlier_tracks);
         sel.flagged.clone_from(&r.flagged_entries);
+        // When the segmentation before the pass found the other bodies, its groups stand:
+        // a search among the scene's rejected tracks would find the scene's own model error
+        // (Hopkins `cars3`, a nearly planar scene: 95 of its 437 tracks taken for a fourth
+        // body after the segmentation had found the three right).
         if rc.separate_objects
+            && bodies.is_none()
             && let Some(model) = &r.model
         {
             // Another rigid object's tracks pass the trimmed track test with some of their
@@ -1508,7 +1793,7 @@ fn robust_stage(
             // Its own entry of `timings`; the recording keeps it on the robust stage.
             sel.other_groups = timer.run("other-objects", |_| {
                 let mut groups = crate::segment::other_objects(
-                    &meas_all,
+                    meas,
                     model,
                     r.noise_sigma,
                     &candidates,
@@ -1542,7 +1827,7 @@ fn robust_stage(
                     // to all its tracks: 31 of a 3 200-frame sequence's 52 s, finding
                     // nothing; 13 s with the whole search seeded here).
                     let more = crate::segment::other_objects_seeded(
-                        &meas_all,
+                        meas,
                         model,
                         r.noise_sigma,
                         &rest,
@@ -1576,6 +1861,11 @@ fn robust_stage(
             sel.flagged.retain(|&(_, p)| inlier[p]);
         }
     }
+    let mut sel = lift(sel);
+    if let Some(b) = &bodies {
+        other_object_tracks += b.groups.iter().map(|g| g.tracks.len()).sum::<usize>();
+    }
+    let n = sel.inlier.len();
     // The projective cameras need 6 tracks in every frame: an affine selection that starves
     // a frame (the affine pass rejects tracks that only perspective explains, most where
     // few tracks are seen) would leave the projective stages unusable. The projective
@@ -1605,31 +1895,15 @@ fn robust_stage(
             other_object_tracks = 0;
         }
     }
-    let mut report = RobustReport {
-        outlier_tracks: Vec::new(),
-        flagged_entries: Vec::new(),
-        n_inlier_tracks: 0,
-        n_outlier_tracks: 0,
-        n_flagged_entries: 0,
-        noise_sigma_px: r.noise_sigma,
-        threshold_px: r.threshold_px,
-        entry_threshold_px: r.entry_threshold_px,
-        iterations: r.iterations,
-        projective: None,
-        inliers_per_iteration: counts,
-        flagged_indices: Vec::new(),
-        rigid_groups_seen: 1 + sel.other_groups.len(),
+    sel.report = Some(RobustReport::of_selection(
+        kept,
+        &sel,
+        [r.noise_sigma, r.threshold_px, r.entry_threshold_px],
+        r.iterations,
+        counts,
         other_object_tracks,
-        seconds: t0.elapsed().as_secs_f64(),
-    };
-    report.update(
-        kept.table,
-        &kept.frames,
-        &kept.tracks,
-        &sel.inlier,
-        &sel.flagged,
-    );
-    sel.report = Some(report);
+        t0,
+    ));
     Ok((sel, Some(meas_all)))
 }
 

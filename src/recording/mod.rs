@@ -310,8 +310,9 @@ impl Default for RecordingOptions {
 pub fn stage_index(stage: &str) -> Option<i64> {
     match stage {
         "complete" => Some(3),
-        // The robust pass's search for other rigid objects: part of the robust stage.
-        "other-objects" => Some(2),
+        // The search for other rigid objects (before and in the robust pass): part of the
+        // robust stage.
+        "other-objects" | "other-bodies" => Some(2),
         _ => STAGES.iter().position(|s| *s == stage).map(|i| i as i64),
     }
 }

@@ -165,11 +165,18 @@ pub struct RobustConfig {
     /// runs only when the rejected tracks number at least `max_rival_ratio` × the inliers.
     /// Default 300.
     pub rival_max_iterations: usize,
-    /// Look for other rigid objects among the rejected and flagged tracks
-    /// ([`crate::segment::other_objects`]) and reject the tracks of each as whole tracks,
+    /// Look for other rigid objects, by segmenting the tracks when the pass leaves a sign
+    /// of one (then passing again over the scene's tracks only; [`crate::segment`]) or,
+    /// when that finds one body or cannot run whole (a long sequence segmented by
+    /// windows), among the rejected and flagged tracks after the pass
+    /// ([`crate::segment::other_objects`]), and reject the tracks of each as whole tracks,
     /// never patched entry by entry (used by [`crate::Reconstruction`]'s pipeline, which
     /// reports the groups seen). Default true.
     pub separate_objects: bool,
+    /// With `separate_objects`: segment the tracks when the pass leaves a sign of another
+    /// body (off: only the search after the pass). [`crate::objects::reconstruct_objects`] turns it off for each object's
+    /// own reconstruction, whose tracks a segmentation has just grouped. Default true.
+    pub segment_first: bool,
 }
 
 impl Default for RobustConfig {
@@ -192,6 +199,7 @@ impl Default for RobustConfig {
             rival_search: true,
             rival_max_iterations: 300,
             separate_objects: true,
+            segment_first: true,
         }
     }
 }
