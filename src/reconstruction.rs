@@ -1463,7 +1463,7 @@ fn other_bodies(table: &TrackTable, meas: &Measurements, config: &Config) -> Opt
     if n < 2 * cfg.min_group_tracks {
         return None;
     }
-    let mut rng = rand::rngs::StdRng::seed_from_u64(config.seed ^ 0x0b0d_1e5);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(config.seed ^ 0x00b0_d1e5);
     let seg = crate::segment::segment_table_whole(table, &cfg, &mut rng)
         .ok()
         .flatten()?;
