@@ -224,14 +224,14 @@ pub struct RobustReport {
     #[serde(skip)]
     pub flagged_indices: Vec<(usize, usize)>,
     /// Rigid groups seen: 1 (the body reconstructed) plus the other rigid objects, found
-    /// by segmenting the kept tracks before the robust pass ([`crate::segment`]) and among
-    /// the tracks the pass rejected or flagged ([`crate::segment::other_objects`]); 1 when
-    /// `separate_objects` is off. A group the projective verdict mostly readmits (a part
+    /// by segmenting the kept tracks when the pass shows signs of them
+    /// ([`crate::segment`]) or among the tracks the pass rejected or flagged
+    /// ([`crate::segment::other_objects`]); 1 when `separate_objects` is off. A group the projective verdict mostly readmits (a part
     /// of the body seen in perspective) is not counted.
     pub rigid_groups_seen: usize,
     /// Tracks of the other rigid objects rejected whole (they are in `outlier_tracks`):
-    /// every track of a group the segmentation found before the pass, and those the pass
-    /// had kept (with flagged entries) of a group found after it.
+    /// every track of a group the segmentation found, and those the pass had kept (with
+    /// flagged entries) of a group found after it.
     pub other_object_tracks: usize,
     pub seconds: f64,
 }
@@ -1428,11 +1428,18 @@ struct OtherBodies {
     n_tracks: usize,
 }
 
+impl OtherBodies {
+    /// Tracks of the other bodies.
+    fn n_other_tracks(&self) -> usize {
+        self.groups.iter().map(|g| g.tracks.len()).sum()
+    }
+}
+
 /// The kept tracks' rigid bodies ([`crate::segment::segment_table_whole`], the number of
 /// groups found, [`crate::segment::Objects::Auto`]). The largest group is the scene; the
-/// others are searched for among the tracks outside it and judged against the scene's
-/// subspace ([`crate::segment::other_objects`]; a member the scene explains as well stays
-/// with the scene), and the bodies found are those whose
+/// others are judged against the scene's subspace
+/// ([`crate::segment::other_objects_among`]; a member the scene explains as well stays with
+/// the scene), and the bodies found are those whose
 /// tracks the robust pass rejects whole, whatever part of them the scene's cameras happen
 /// to explain (a second body was before kept in part with entries flagged as gross errors
 /// one by one: Hopkins `2RT3RC_g12`, 173 entries on its other bodies' tracks; or the robust
@@ -1444,8 +1451,8 @@ struct OtherBodies {
 /// pass's own search for other objects then runs alone, as its cost follows the
 /// observations). Its own RNG (from `config.seed`), so that the robust pass's draws do not
 /// change when no other body is found. Cost: the segmentation's ([`crate::segment`]), plus
-/// that of [`crate::segment::other_objects`] on the tracks outside the scene's group; a
-/// failed segmentation (too few tracks to score) is no body.
+/// that of [`crate::segment::other_objects_among`] on the tracks outside the scene's group;
+/// a failed segmentation (too few tracks to score) is no body.
 fn other_bodies(table: &TrackTable, meas: &Measurements, config: &Config) -> Option<OtherBodies> {
     let cfg = crate::segment::SegmentConfig {
         image_area: config
@@ -1479,7 +1486,7 @@ fn other_bodies(table: &TrackTable, meas: &Measurements, config: &Config) -> Opt
     // likelihood ratio of the two models, a group noisier than a rigid body by its rigid
     // consensus, and the tracks an object explains better than the scene joining it): a
     // group of the scene's tracks that carry gross entries, with a few junk tracks, is no
-    // body.
+    // body; a member the scene explains as well stays with the scene, for the pass to judge.
     let scene = &seg.objects[0];
     let search = crate::segment::SegmentConfig::default();
     let groups = crate::segment::other_objects_among(
@@ -1491,29 +1498,6 @@ fn other_bodies(table: &TrackTable, meas: &Measurements, config: &Config) -> Opt
         &mut rng,
     )
     .ok()?;
-    // A track the scene's subspace explains as well as its group's stays with the scene, for
-    // the robust pass to judge: a body moving close to the scene's motion takes some of the
-    // scene's tracks into its group, where nothing tells the two apart (the synthetic scene
-    // above, whose second object's subspace fits 6 of the scene's tracks within 0.55–0.83
-    // px, the scene's within 0.41–0.66). The margin is the search's own for a track to join
-    // an object: `ν ln(r²_scene / r²_own) > 2 ln(2 n_obs)`.
-    let ts = crate::robust::subspace::TrackSubspace::new(meas, &search.subspace);
-    let ln_n = ((2 * meas.n_observed()).max(2) as f64).ln();
-    let groups: Vec<crate::segment::OtherObject> = groups
-        .into_iter()
-        .map(|mut g| {
-            g.tracks.retain(|&p| {
-                let (Some(o), Some(m)) = (ts.track_fit(&g.model, p), ts.track_fit(&scene.model, p))
-                else {
-                    return true;
-                };
-                let nu = (2.0 * o.kept as f64 - 3.0).max(0.0);
-                nu * (m.rms * m.rms / (o.rms * o.rms).max(1e-24)).ln() > 2.0 * ln_n
-            });
-            g
-        })
-        .filter(|g| g.tracks.len() >= search.min_group_tracks)
-        .collect();
     if groups.is_empty() {
         return None;
     }
@@ -1554,7 +1538,7 @@ fn bodies_only(
         [f64::NAN; 3],
         iterations,
         counts,
-        bodies.groups.iter().map(|g| g.tracks.len()).sum(),
+        bodies.n_other_tracks(),
         t0,
     ));
     sel
@@ -1685,12 +1669,6 @@ fn robust_stage(
     };
     let n = meas.n_points();
     sel.inlier = vec![true; n];
-    let lift = |mut sel: Selection| {
-        if let Some(b) = &bodies {
-            sel.lift(b);
-        }
-        sel
-    };
     let unjudged = |sel: Selection, iterations: usize, counts: Vec<usize>| match &bodies {
         Some(b) => bodies_only(sel, b, kept, iterations, counts, t0),
         None => sel,
@@ -1707,7 +1685,7 @@ fn robust_stage(
                 "robust pass skipped on the scene's tracks: {why}; the {} tracks of {} other \
                  rigid bod{} the segmentation found and its {} outlier track(s) are rejected, \
                  the scene's {} tracks all fitted (an outlier among them cannot be detected)",
-                b.groups.iter().map(|g| g.tracks.len()).sum::<usize>(),
+                b.n_other_tracks(),
                 b.groups.len(),
                 if b.groups.len() == 1 { "y" } else { "ies" },
                 b.outliers.len(),
@@ -1861,9 +1839,9 @@ fn robust_stage(
             sel.flagged.retain(|&(_, p)| inlier[p]);
         }
     }
-    let mut sel = lift(sel);
     if let Some(b) = &bodies {
-        other_object_tracks += b.groups.iter().map(|g| g.tracks.len()).sum::<usize>();
+        sel.lift(b);
+        other_object_tracks += b.n_other_tracks();
     }
     let n = sel.inlier.len();
     // The projective cameras need 6 tracks in every frame: an affine selection that starves

@@ -310,8 +310,8 @@ impl Default for RecordingOptions {
 pub fn stage_index(stage: &str) -> Option<i64> {
     match stage {
         "complete" => Some(3),
-        // The search for other rigid objects (before and in the robust pass): part of the
-        // robust stage.
+        // The searches for other rigid objects (segmenting the kept tracks, and among the
+        // tracks the pass rejected): part of the robust stage.
         "other-objects" | "other-bodies" => Some(2),
         _ => STAGES.iter().position(|s| *s == stage).map(|i| i as i64),
     }

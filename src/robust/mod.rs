@@ -174,8 +174,9 @@ pub struct RobustConfig {
     /// reports the groups seen). Default true.
     pub separate_objects: bool,
     /// With `separate_objects`: segment the tracks when the pass leaves a sign of another
-    /// body (off: only the search after the pass). [`crate::objects::reconstruct_objects`] turns it off for each object's
-    /// own reconstruction, whose tracks a segmentation has just grouped. Default true.
+    /// body (off: only the search after the pass). [`crate::objects::reconstruct_objects`]
+    /// turns it off for each object's own reconstruction, whose tracks a segmentation has
+    /// just grouped. Default true.
     pub segment_first: bool,
 }
 

@@ -2146,6 +2146,7 @@ pub fn other_objects_seeded<R: Rng + ?Sized>(
         candidates,
         &ts,
         &seg.objects,
+        false,
         cfg,
         rng,
     ))
@@ -2155,8 +2156,14 @@ pub fn other_objects_seeded<R: Rng + ?Sized>(
 /// their tracks indices into `meas`, none of them in `main`'s group), judged against the
 /// main body's subspace `main` as [`other_objects`] judges the groups it finds among its
 /// candidates — without segmenting them again (a few tracks of an object, segmented alone,
-/// can fall below their label cost: Hopkins `two_cranes_g12`'s crane, 17 tracks). Returns
-/// the groups that pass, with the tracks that join them, largest first.
+/// can fall below their label cost: Hopkins `two_cranes_g12`'s crane, 17 tracks). A member
+/// that `main` explains as well, by the margin a track needs to join an object
+/// (`ν ln(r²_main / r²_own) > 2 ln(2 n_obs)`), is dropped from its group: a body moving
+/// close to the main body's motion takes some of its tracks into its group, where nothing
+/// tells the two apart (a synthetic scene whose second object's subspace fits 6 of the
+/// scene's tracks within 0.55–0.83 px, the scene's within 0.41–0.66); a group left with
+/// fewer than `min_group_tracks` is dropped. Returns the groups that pass, with the tracks
+/// that join them, largest first (before that drop).
 ///
 /// Complexity: O(F·n) for the estimator over the groups' `n` tracks and O(n_obs · groups)
 /// for the comparisons, plus a RANSAC over each group above the noise bound.
@@ -2201,13 +2208,15 @@ pub fn other_objects_among<R: Rng + ?Sized>(
         &candidates,
         &ts,
         &local,
+        true,
         cfg,
         rng,
     ))
 }
 
 /// The judgement of [`other_objects`] and [`other_objects_among`]: `groups` (tracks as
-/// indices into `candidates`, which index `meas`; `ts` the estimator over the candidates).
+/// indices into `candidates`, which index `meas`; `ts` the estimator over the candidates);
+/// with `members_beat_main`, the members the main body explains as well are dropped.
 #[allow(clippy::too_many_arguments)]
 fn judge_groups<R: Rng + ?Sized>(
     meas: &Measurements,
@@ -2216,6 +2225,7 @@ fn judge_groups<R: Rng + ?Sized>(
     candidates: &[usize],
     ts: &TrackSubspace,
     groups: &[ObjectGroup],
+    members_beat_main: bool,
     cfg: &SegmentConfig,
     rng: &mut R,
 ) -> Vec<OtherObject> {
@@ -2307,7 +2317,7 @@ fn judge_groups<R: Rng + ?Sized>(
                 let Some(o) = all.track_fit(model, p) else {
                     continue;
                 };
-                let lr = fit_dof(&o) * (m.rms * m.rms / (o.rms * o.rms).max(1e-24)).ln();
+                let lr = join_ratio(&o, &m);
                 if lr > 2.0 * ln_n && best.is_none_or(|(_, b)| lr > b) {
                     best = Some((k, lr));
                 }
@@ -2326,7 +2336,29 @@ fn judge_groups<R: Rng + ?Sized>(
     }
     out.iter_mut().for_each(|g| g.tracks.sort_unstable());
     out.sort_by_key(|g| std::cmp::Reverse(g.tracks.len()));
+    if members_beat_main {
+        // A member the main body explains as well (by the joining margin) is no evidence
+        // of the object: it stays with the main body.
+        for g in &mut out {
+            g.tracks.retain(
+                |&p| match (all.track_fit(&g.model, p), all.track_fit(main, p)) {
+                    (Some(o), Some(m)) => join_ratio(&o, &m) > 2.0 * ln_n,
+                    _ => true,
+                },
+            );
+        }
+        out.retain(|g| g.tracks.len() >= cfg.min_group_tracks);
+    }
     out
+}
+
+/// The likelihood ratio of a track's fit `own` to an object's subspace against its fit
+/// `main` to the main body's: `ν ln(r²_main / r²_own)`, `ν` the own fit's degrees of freedom.
+fn join_ratio(
+    own: &crate::robust::subspace::TrackFit,
+    main: &crate::robust::subspace::TrackFit,
+) -> f64 {
+    fit_dof(own) * (main.rms * main.rms / (own.rms * own.rms).max(1e-24)).ln()
 }
 
 /// Another rigid object found by [`other_objects`]: its tracks (indices into the table
