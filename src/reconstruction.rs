@@ -1453,7 +1453,12 @@ impl OtherBodies {
 /// change when no other body is found. Cost: the segmentation's ([`crate::segment`]), plus
 /// that of [`crate::segment::other_objects_among`] on the tracks outside the scene's group;
 /// a failed segmentation (too few tracks to score) is no body.
-fn other_bodies(table: &TrackTable, meas: &Measurements, config: &Config) -> Option<OtherBodies> {
+fn other_bodies(
+    table: &TrackTable,
+    meas: &Measurements,
+    config: &Config,
+    suspect: &[bool],
+) -> Option<OtherBodies> {
     let cfg = crate::segment::SegmentConfig {
         image_area: config
             .perspective
@@ -1471,7 +1476,14 @@ fn other_bodies(table: &TrackTable, meas: &Measurements, config: &Config) -> Opt
         return None;
     }
     let mut rng = rand::rngs::StdRng::seed_from_u64(config.seed ^ 0x00b0_d1e5);
-    let seg = crate::segment::segment_table_whole(table, &cfg, &mut rng)
+    // On a large table a sample is segmented, the other tracks labelled against its groups.
+    let sample = crate::segment::search_sample(
+        &(0..n).collect::<Vec<_>>(),
+        |p| table.track_len(p),
+        |p| suspect.get(p).is_some_and(|&b| b),
+        &mut rng,
+    );
+    let seg = crate::segment::segment_table_sampled(table, &sample, &cfg, &mut rng)
         .ok()
         .flatten()?;
     // Groups told apart only weakly are pieces of one body seen in perspective, which the
@@ -1637,25 +1649,33 @@ fn robust_stage(
     // (and those no body explains) only, the other bodies' tracks rejected whole, however
     // well their entries happen to fit the scene's cameras. A clean table is not segmented
     // (its cost is the pass's alone).
-    let signs = |r: &robust::RobustResult| {
-        if !matches!(r.verdict, robust::Verdict::RigidMajority { .. }) {
-            return true;
-        }
-        let mut suspect = vec![false; r.inlier_tracks.len()];
+    // Rejected, or kept only by the floor: the tracks the scene's model does not explain
+    // (a track with a flagged entry is most often one of the scene's with a gross error).
+    let suspects = |r: &robust::RobustResult| -> Vec<bool> {
+        (0..r.inlier_tracks.len())
+            .map(|p| !r.inlier_tracks[p] || r.floor_kept.get(p).is_some_and(|&f| f))
+            .collect()
+    };
+    let signs = |r: &robust::RobustResult, suspect: &[bool]| {
+        let mut flagged = suspect.to_vec();
         r.flagged_entries
             .iter()
-            .for_each(|&(_, p)| suspect[p] = true);
-        (0..suspect.len()).for_each(|p| {
-            suspect[p] |= !r.inlier_tracks[p] || r.floor_kept.get(p).is_some_and(|&f| f)
-        });
-        let suspect = suspect.iter().filter(|&&b| b).count();
-        suspect >= 2 * crate::segment::SegmentConfig::default().min_group_tracks
+            .for_each(|&(_, p)| flagged[p] = true);
+        !matches!(r.verdict, robust::Verdict::RigidMajority { .. })
+            || flagged.iter().filter(|&&b| b).count()
+                >= 2 * crate::segment::SegmentConfig::default().min_group_tracks
     };
     let bodies = match &r_all {
-        Ok(r) if rc.separate_objects && rc.segment_first && signs(r) => timer
-            .run("other-bodies", |_| {
-                other_bodies(kept.table, &meas_all, config)
-            }),
+        Ok(r) if rc.separate_objects && rc.segment_first => {
+            let suspect = suspects(r);
+            signs(r, &suspect)
+                .then(|| {
+                    timer.run("other-bodies", |_| {
+                        other_bodies(kept.table, &meas_all, config, &suspect)
+                    })
+                })
+                .flatten()
+        }
         _ => None,
     };
     let sub;

@@ -699,3 +699,123 @@ fn a_seeded_search_finds_the_object_among_its_seeds() {
     assert!(on_object >= 29, "{on_object} of the object's 30 tracks");
     assert_eq!(g.len(), on_object, "scene tracks in the group: {g:?}");
 }
+
+#[test]
+fn a_sample_is_segmented_and_every_other_track_labelled() {
+    // Three bodies (one translating), 40 % of each track's frames hidden, 12 random walks;
+    // half the tracks segmented, the other half labelled against the groups found.
+    let sizes = [
+        (160, Motion::General),
+        (60, Motion::General),
+        (40, Motion::Translation),
+    ];
+    let (meas, truth) = scene(40, &sizes, 12, 0.5, 0.4, 11);
+    let table = crate::TrackTable::from_measurements(&meas);
+    let n = truth.len();
+    let sample: Vec<usize> = (0..n).filter(|p| p % 2 == 0).collect();
+    let seg = segment_table_sampled(
+        &table,
+        &sample,
+        &SegmentConfig::default(),
+        &mut StdRng::seed_from_u64(7),
+    )
+    .unwrap()
+    .expect("segmented whole, not by windows");
+    assert_eq!(seg.labels.len(), n);
+    assert_eq!(seg.objects.len(), 3, "groups found");
+    // Ordered by the whole membership, largest first, and consistent with the labels.
+    let sizes_found: Vec<usize> = seg.objects.iter().map(|o| o.tracks.len()).collect();
+    assert!(
+        sizes_found.windows(2).all(|w| w[0] >= w[1]),
+        "{sizes_found:?}"
+    );
+    for (g, o) in seg.objects.iter().enumerate() {
+        assert!(o.tracks.iter().all(|&p| seg.labels[p] == Label::Object(g)));
+    }
+    let labelled: usize = sizes_found.iter().sum();
+    let grouped = seg
+        .labels
+        .iter()
+        .filter(|l| matches!(l, Label::Object(_)))
+        .count();
+    assert_eq!(labelled, grouped);
+    // The tracks outside the sample are labelled as well as those in it: both halves'
+    // object tracks within 2 % of the truth, and the walks outliers.
+    let err = error_on_objects(&seg, &truth);
+    assert!(err <= 0.02, "misclassification {err}");
+    let odd_objects: Vec<usize> = (0..n).filter(|&p| p % 2 == 1 && truth[p] >= 0).collect();
+    let found: Vec<i64> = odd_objects.iter().map(|&p| seg.labels[p].code()).collect();
+    let t: Vec<usize> = odd_objects.iter().map(|&p| truth[p] as usize).collect();
+    let err_odd = misclassification(&found, &t);
+    assert!(
+        err_odd <= 0.02,
+        "misclassification outside the sample {err_odd}"
+    );
+    let walks_out = (0..n)
+        .filter(|&p| truth[p] < 0 && seg.labels[p] == Label::Outlier)
+        .count();
+    assert!(walks_out >= 11, "{walks_out} of 12 walks labelled outlier");
+
+    // A sample of every track is the whole segmentation; a bad index is an error.
+    let whole = segment_table_whole(
+        &table,
+        &SegmentConfig::default(),
+        &mut StdRng::seed_from_u64(7),
+    )
+    .unwrap()
+    .unwrap();
+    let all = segment_table_sampled(
+        &table,
+        &(0..n).collect::<Vec<_>>(),
+        &SegmentConfig::default(),
+        &mut StdRng::seed_from_u64(7),
+    )
+    .unwrap()
+    .unwrap();
+    assert_eq!(all.labels, whole.labels);
+    for bad in [vec![3, 2], vec![0, n]] {
+        assert!(matches!(
+            segment_table_sampled(
+                &table,
+                &bad,
+                &SegmentConfig::default(),
+                &mut StdRng::seed_from_u64(7)
+            ),
+            Err(Error::InvalidConfig {
+                field: "sample",
+                ..
+            })
+        ));
+    }
+}
+
+#[test]
+fn a_search_sample_is_bounded_and_prefers_the_suspects() {
+    // 3000 tracks of 100 frames: m = 60 000 / 100 = 600 tracks, half of them from the 400
+    // preferred; 100 tracks: all.
+    let tracks: Vec<usize> = (0..3000).collect();
+    let preferred = |p: usize| p % 30 < 4;
+    let mut rng = StdRng::seed_from_u64(3);
+    let s = search_sample(&tracks, |_| 100, preferred, &mut rng);
+    assert_eq!(s.len(), 600);
+    assert!(s.windows(2).all(|w| w[0] < w[1]), "increasing, no repeats");
+    assert_eq!(s.iter().filter(|&&p| preferred(p)).count(), 300);
+    let again = search_sample(&tracks, |_| 100, preferred, &mut StdRng::seed_from_u64(3));
+    assert_eq!(s, again, "reproducible with the seed");
+    // Fewer preferred than half: all of them, the rest from the others.
+    let s = search_sample(&tracks, |_| 100, |p| p < 50, &mut rng);
+    assert_eq!((s.len(), s.iter().filter(|&&p| p < 50).count()), (600, 50));
+    // Short tracks: the budget in tracks is capped; long ones: at least 200 tracks.
+    assert_eq!(
+        search_sample(&tracks, |_| 10, preferred, &mut rng).len(),
+        SEARCH_MAX_TRACKS
+    );
+    assert_eq!(
+        search_sample(&tracks, |_| 5000, preferred, &mut rng).len(),
+        SEARCH_MIN_TRACKS
+    );
+    assert_eq!(
+        search_sample(&tracks[..100], |_| 100, preferred, &mut rng),
+        (0..100).collect::<Vec<_>>()
+    );
+}
