@@ -792,8 +792,9 @@ pub const SEARCH_MAX_TRACKS: usize = 800;
 /// `prefer`red (where another body's tracks are likely: those the robust pass rejected),
 /// the rest from the others, uniform draws without replacement (partial Fisher–Yates), so
 /// that a body holding a few percent of a large table keeps enough tracks in the sample to
-/// pay for its subspace. The tracks left out are labelled afterwards against the groups
-/// found ([`segment_table_sampled`]; the join step of [`other_objects`]). `O(N)`.
+/// pay for its subspace (a body needs roughly `3 (F / k) ln n` tracks of `k` frames in the
+/// sample to pay its label cost `8 (8F − 9) ln n`). The tracks left out are labelled
+/// afterwards against the groups found ([`segment_table_sampled`]). `O(N)`.
 pub fn search_sample<R: Rng + ?Sized>(
     tracks: &[usize],
     len: impl Fn(usize) -> usize,
@@ -2257,9 +2258,7 @@ fn fit_dof(o: &crate::robust::subspace::TrackFit) -> f64 {
 /// into `meas`, and their subspaces), largest first (empty when there are fewer than
 /// `2 · min_group_tracks` candidates or no group passes).
 ///
-/// Complexity: that of [`segment`] on the candidates — on a sample of them when their
-/// observations exceed [`SEARCH_OBSERVATIONS`] ([`search_sample`]; the others join by the
-/// rule above), so at most that many — plus O(F·N) for building the track
+/// Complexity: that of [`segment`] on the candidates, plus O(F·N) for building the track
 /// estimator over all tracks and O(n_obs · groups) for the comparisons, plus for each group
 /// above the noise bound a RANSAC over its tracks (at most the RANSAC budget of hypotheses,
 /// each scoring the group's observations).
@@ -2295,32 +2294,18 @@ pub fn other_objects_seeded<R: Rng + ?Sized>(
         return Ok(Vec::new());
     }
     let n_all = meas.n_points();
-    // Many candidates (a large table's rejected tracks): a sample of them is segmented
-    // (the seeds preferred), and the join step of `judge_groups` gives the others to the
-    // groups found.
-    let mut is_seed = vec![false; n_all];
-    seeds
-        .into_iter()
-        .flatten()
-        .filter(|&&p| p < n_all)
-        .for_each(|&p| is_seed[p] = true);
-    let sampled = search_sample(
-        candidates,
-        |p| {
-            (0..meas.n_frames())
-                .filter(|&f| meas.is_visible(f, p))
-                .count()
-        },
-        |p| is_seed.get(p).is_some_and(|&b| b),
-        rng,
-    );
-    let candidates = &sampled[..];
     let sub = meas.select_tracks(candidates);
     // One estimator over the candidates serves the segmentation and both fits below (a
     // track's fit to `main` depends only on the track and the frames).
     let ts = TrackSubspace::new(&sub, &cfg.subspace);
-    let seed_mask: Option<Vec<bool>> =
-        seeds.map(|_| candidates.iter().map(|&p| is_seed[p]).collect());
+    let seed_mask: Option<Vec<bool>> = seeds.map(|seeds| {
+        let mut is_seed = vec![false; n_all];
+        seeds
+            .iter()
+            .filter(|&&p| p < n_all)
+            .for_each(|&p| is_seed[p] = true);
+        candidates.iter().map(|&p| is_seed[p]).collect()
+    });
     // Without the spectral partition: the candidates are mostly junk (random walks,
     // sliding tracks), whose groups the energy's count includes, and repartitioning them
     // spectrally split the object (Hopkins `cars1`: three groups seen instead of two).
