@@ -1435,8 +1435,10 @@ impl OtherBodies {
     }
 }
 
-/// The kept tracks' rigid bodies ([`crate::segment::segment_table_whole`], the number of
-/// groups found, [`crate::segment::Objects::Auto`]). The largest group is the scene; the
+/// The kept tracks' rigid bodies ([`crate::segment::segment_table_sampled`], the number of
+/// groups found, [`crate::segment::Objects::Auto`]; on a large table a sample of the tracks
+/// segmented, the robust pass's `suspect`s preferred, and the others labelled against its
+/// groups: [`crate::segment::search_sample`]). The largest group is the scene; the
 /// others are judged against the scene's subspace
 /// ([`crate::segment::other_objects_among`]; a member the scene explains as well stays with
 /// the scene), and the bodies found are those whose

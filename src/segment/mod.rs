@@ -766,13 +766,8 @@ pub fn segment_table_whole<R: Rng + ?Sized>(
     cfg: &SegmentConfig,
     rng: &mut R,
 ) -> Result<Option<Segmentation>> {
-    cfg.validate()?;
-    let t0 = Instant::now();
-    let ts = TrackSubspace::from_table(table, &cfg.subspace);
-    if windows::plan(&ts, cfg).is_some() {
-        return Ok(None);
-    }
-    segment_whole(&ts, cfg, rng, t0).map(Some)
+    let all: Vec<usize> = (0..table.n_tracks()).collect();
+    segment_table_sampled(table, &all, cfg, rng)
 }
 
 /// Observations a search for other rigid bodies segments at most (the tracks of at least

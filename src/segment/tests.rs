@@ -757,12 +757,11 @@ fn a_sample_is_segmented_and_every_other_track_labelled() {
     assert!(walks_out >= 11, "{walks_out} of 12 walks labelled outlier");
 
     // A sample of every track is the whole segmentation; a bad index is an error.
-    let whole = segment_table_whole(
+    let whole = segment_table(
         &table,
         &SegmentConfig::default(),
         &mut StdRng::seed_from_u64(7),
     )
-    .unwrap()
     .unwrap();
     let all = segment_table_sampled(
         &table,
