@@ -512,7 +512,38 @@ struct TrackInfo<'a> {
     sigma2_max: f64,
 }
 
-impl TrackInfo<'_> {
+impl<'a> TrackInfo<'a> {
+    /// The tracks of `ts`: `k_p` their frames, `ν_p = 2 kept_p − 3` the degrees of freedom
+    /// of their fits trimmed by `trim` (`⌊trim · k⌋` entries dropped, at least 2 kept), the
+    /// `σ²` floor from the image `area`; no bound on a group's `σ²` yet.
+    fn new(ts: &'a TrackSubspace, trim: f64, area: f64) -> Self {
+        let k: Vec<f64> = (0..ts.n_tracks())
+            .map(|p| ts.frames_of(p).len() as f64)
+            .collect();
+        let nu = k
+            .iter()
+            .map(|&k| {
+                let k = k as usize;
+                let kept = k - ((trim * k as f64).floor() as usize).min(k.saturating_sub(2));
+                (2.0 * kept as f64 - 3.0).max(0.0)
+            })
+            .collect();
+        TrackInfo {
+            ts,
+            nu,
+            k,
+            sigma2_floor: (1e-6 * area.sqrt()).powi(2),
+            sigma2_max: f64::INFINITY,
+        }
+    }
+
+    /// Every track's outlier cost `2 k_p ln(A / 2π)` in `E` (a track uniform on the image
+    /// of area `A`).
+    fn outlier_costs(&self, area: f64) -> Vec<f64> {
+        let per_frame = 2.0 * (area / (2.0 * std::f64::consts::PI)).ln();
+        self.k.iter().map(|&k| k * per_frame).collect()
+    }
+
     /// Every track's `ν_p r²_p` under `model` (`None`: not scorable).
     fn chi(&self, model: &AffineSubspace) -> Vec<Option<f64>> {
         self.ts
@@ -875,45 +906,41 @@ pub fn segment_table_sampled<R: Rng + ?Sized>(
         labels[p] = seg.labels[i];
         in_sample[p] = true;
     }
+    // The tracks outside the sample that can be scored are judged as step 5 judges the
+    // outliers (`rejoin`); the others stay unscored.
     let area = cfg.image_area.unwrap_or_else(|| bounding_area(&ts));
-    let floor2 = (1e-6 * area.sqrt()).powi(2);
-    let sigma2: Vec<f64> = seg
-        .objects
-        .iter()
-        .map(|o| if cfg.shared_noise { seg.sigma } else { o.sigma })
-        .map(|s| (s * s).max(floor2))
+    let info = TrackInfo::new(&ts, cfg.subspace.trim_fraction, area);
+    let outlier = info.outlier_costs(area);
+    let min_overlap = ts.min_overlap();
+    let candidates: Vec<usize> = (0..n)
+        .filter(|&p| !in_sample[p] && ts.frames_of(p).len() >= min_overlap)
         .collect();
-    let (min_overlap, trim) = (ts.min_overlap(), cfg.subspace.trim_fraction);
     let objects = &seg.objects;
-    let judged: Vec<(usize, Label)> = (0..n)
-        .into_par_iter()
-        .filter(|&p| !in_sample[p])
-        .map(|p| {
-            let k = ts.frames_of(p).len();
-            if k < min_overlap {
-                return (p, Label::Unscored);
-            }
-            let kept = k - ((trim * k as f64).floor() as usize).min(k.saturating_sub(2));
-            let nu = (2.0 * kept as f64 - 3.0).max(0.0);
-            let outlier = 2.0 * k as f64 * (area / (2.0 * std::f64::consts::PI)).ln();
-            let best = objects
+    // Each candidate's `ν r²` under each group (`None`: not scorable), fitted in parallel.
+    let chi: Vec<Vec<Option<f64>>> = candidates
+        .par_iter()
+        .map(|&p| {
+            objects
                 .iter()
-                .zip(&sigma2)
-                .enumerate()
-                .filter_map(|(g, (o, &s2))| {
+                .map(|o| {
                     let fit = ts.track_fit(&o.model, p)?;
-                    (fit.overlap >= min_overlap && nu > 0.0)
-                        .then(|| (g, nu * fit.rms * fit.rms / s2 + 2.0 * k as f64 * s2.ln()))
+                    (fit.overlap >= min_overlap && info.nu[p] > 0.0)
+                        .then(|| info.nu[p] * fit.rms * fit.rms)
                 })
-                .min_by(|a, b| a.1.total_cmp(&b.1));
-            match best {
-                Some((g, d)) if d < outlier => (p, Label::Object(g)),
-                _ => (p, Label::Outlier),
-            }
+                .collect()
         })
         .collect();
-    for (p, label) in judged {
-        labels[p] = label;
+    let sigma2 = |o: &ObjectGroup| if cfg.shared_noise { seg.sigma } else { o.sigma }.powi(2);
+    let joined = rejoin(&info, &outlier, &candidates, objects.len(), |g, i| {
+        chi[i][g].map(|c| (c, sigma2(&objects[g])))
+    });
+    for &p in &candidates {
+        labels[p] = Label::Outlier;
+    }
+    for (g, members) in joined.into_iter().enumerate() {
+        for i in members {
+            labels[candidates[i]] = Label::Object(g);
+        }
     }
     // The groups' whole memberships, largest first.
     let k = seg.objects.len();
@@ -1006,23 +1033,9 @@ fn segment_tracks<R: Rng + ?Sized>(
             have: eligible.len(),
         });
     }
-    let trim = cfg.subspace.trim_fraction;
-    let nu: Vec<f64> = (0..n)
-        .map(|p| {
-            let k = ts.frames_of(p).len();
-            let kept = k - ((trim * k as f64).floor() as usize).min(k.saturating_sub(2));
-            (2.0 * kept as f64 - 3.0).max(0.0)
-        })
-        .collect();
     let n_obs: usize = (0..n).map(|p| 2 * ts.frames_of(p).len()).sum();
     let area = cfg.image_area.unwrap_or_else(|| bounding_area(ts));
-    let mut info = TrackInfo {
-        ts,
-        nu,
-        k: (0..n).map(|p| ts.frames_of(p).len() as f64).collect(),
-        sigma2_floor: (1e-6 * area.sqrt()).powi(2),
-        sigma2_max: f64::INFINITY,
-    };
+    let mut info = TrackInfo::new(ts, cfg.subspace.trim_fraction, area);
 
     // 1. Hypotheses from local neighbourhoods, each with its own σ².
     let nbrs = neighbours(ts, &eligible, cfg.neighbours);
@@ -1124,9 +1137,7 @@ fn segment_tracks<R: Rng + ?Sized>(
     let n_sampled = pool.models.len();
     let given = matches!(cfg.objects, Objects::Count(_));
     let lambda = cfg.label_cost_scale * (n_obs.max(2) as f64).ln();
-    let outlier: Vec<f64> = (0..n)
-        .map(|p| 2.0 * info.k[p] * (area / (2.0 * std::f64::consts::PI)).ln())
-        .collect();
+    let outlier = info.outlier_costs(area);
     // The shared noise variance (when the groups share one σ): first the median of the
     // sampled hypotheses', then pooled over the groups' tracks each round.
     let shared0: Option<f64> = cfg
