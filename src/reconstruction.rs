@@ -1454,12 +1454,15 @@ impl OtherBodies {
 /// observations). Its own RNG (from `config.seed`), so that the robust pass's draws do not
 /// change when no other body is found. Cost: the segmentation's ([`crate::segment`]), plus
 /// that of [`crate::segment::other_objects_among`] on the tracks outside the scene's group;
-/// a failed segmentation (too few tracks to score) is no body.
+/// a failed segmentation (too few tracks to score) is no body. `noise_sigma_px` is the
+/// robust pass's σ, which bounds a rigid group's noise when it is below the
+/// segmentation's own σ of the scene (inflated by the scene's gross entries).
 fn other_bodies(
     table: &TrackTable,
     meas: &Measurements,
     config: &Config,
     suspect: &[bool],
+    noise_sigma_px: f64,
 ) -> Option<OtherBodies> {
     let cfg = crate::segment::SegmentConfig {
         image_area: config
@@ -1503,10 +1506,20 @@ fn other_bodies(
     // body; a member the scene explains as well stays with the scene, for the pass to judge.
     let scene = &seg.objects[0];
     let search = crate::segment::SegmentConfig::default();
+    // The scene's noise bounds a rigid group's (`max_group_sigma_ratio`): the robust pass's
+    // estimate from its inlier entries when it has one, as the search after the pass uses.
+    // The segmentation's own σ of the scene is an RMS over whole tracks, which the scene's
+    // gross entries inflate (a 300 × 3000 table with 2 % of them: 7.2 px against the pass's
+    // 0.51), and a group of sliding tracks and random walks at 13 px then passed as a body.
+    let noise = if noise_sigma_px.is_finite() && noise_sigma_px > 0.0 {
+        scene.sigma.min(noise_sigma_px)
+    } else {
+        scene.sigma
+    };
     let groups = crate::segment::other_objects_among(
         meas,
         &scene.model,
-        scene.sigma,
+        noise,
         &seg.objects[1..],
         &search,
         &mut rng,
@@ -1673,7 +1686,7 @@ fn robust_stage(
             signs(r, &suspect)
                 .then(|| {
                     timer.run("other-bodies", |_| {
-                        other_bodies(kept.table, &meas_all, config, &suspect)
+                        other_bodies(kept.table, &meas_all, config, &suspect, r.noise_sigma)
                     })
                 })
                 .flatten()

@@ -818,3 +818,80 @@ fn a_search_sample_is_bounded_and_prefers_the_suspects() {
         (0..100).collect::<Vec<_>>()
     );
 }
+
+#[test]
+fn a_noisy_group_is_judged_by_its_refitted_consensus() {
+    // A second body's 40 tracks in one group with 20 random walks (σ of the group far above
+    // `max_group_sigma`): its rigid consensus is found, refitted, held to the bound on its
+    // typical track, and judged; the walks are not taken along. The scene's tracks carry
+    // gross entries (4 per track, 30–60 px), which the trimmed fits ignore.
+    let (mut meas, truth) = scene(
+        30,
+        &[(250, Motion::General), (40, Motion::General)],
+        20,
+        0.5,
+        0.0,
+        12,
+    );
+    let mut rng = StdRng::seed_from_u64(4);
+    for p in 0..250 {
+        for _ in 0..1 {
+            let fr = rng.random_range(0..30);
+            let a = std::f64::consts::TAU * rng.random::<f64>();
+            let d = 30.0 + 30.0 * rng.random::<f64>();
+            meas.w[(2 * fr, p)] += d * a.cos();
+            meas.w[(2 * fr + 1, p)] += d * a.sin();
+        }
+    }
+    let cfg = SegmentConfig::default();
+    let ts = TrackSubspace::new(&meas, &cfg.subspace);
+    let fit = |tracks: &[usize]| {
+        let m0 = tracks
+            .windows(4)
+            .find_map(|w| ts.fit(w))
+            .expect("a minimal fit");
+        ts.refit_with(&m0, tracks, cfg.refit_sweeps)
+            .expect("a subspace")
+    };
+    let main = fit(&(0..250).collect::<Vec<_>>());
+    let group = |tracks: Vec<usize>| {
+        let model = fit(&tracks);
+        ObjectGroup {
+            tracks,
+            rms: 10.0,
+            sigma: 10.0,
+            model,
+            pieces: 1,
+        }
+    };
+    for seed in 0..3 {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let found = other_objects_among(
+            &meas,
+            &main,
+            0.5,
+            &[group((250..310).collect())],
+            &cfg,
+            &mut rng,
+        )
+        .expect("valid input");
+        assert_eq!(found.len(), 1, "seed {seed}: {} bodies", found.len());
+        let on = found[0].tracks.iter().filter(|&&p| truth[p] == 1).count();
+        assert!(
+            on >= 39 && found[0].tracks.len() == on,
+            "seed {seed}: {on} of the body's 40 tracks, group {:?}",
+            found[0].tracks
+        );
+        // The walks alone are no body.
+        let found = other_objects_among(
+            &meas,
+            &main,
+            0.5,
+            &[group((290..310).collect())],
+            &cfg,
+            &mut rng,
+        )
+        .expect("valid input");
+        assert!(found.is_empty(), "seed {seed}: walks taken for a body");
+    }
+}
