@@ -1882,7 +1882,7 @@ fn robust_stage(
                 // too (Hopkins `cars3`, nearly planar: 105 tracks at a median
                 // `r_scene / r_own` of 1.72), where the second objects of synthetic tables
                 // with mixed outliers stood at 6.6–8.5 (docs/results.md).
-                if bodies.is_some() {
+                if bodies.is_some() && !groups.is_empty() {
                     let ts = crate::robust::subspace::TrackSubspace::new(meas, &seg_cfg.subspace);
                     groups.retain(|g| {
                         let mut q: Vec<f64> = g

@@ -524,7 +524,7 @@ impl<'a> TrackInfo<'a> {
             .iter()
             .map(|&k| {
                 let k = k as usize;
-                let kept = k - ((trim * k as f64).floor() as usize).min(k.saturating_sub(2));
+                let kept = k - crate::robust::subspace::trim_count(trim, k);
                 (2.0 * kept as f64 - 3.0).max(0.0)
             })
             .collect();

@@ -824,7 +824,7 @@ fn a_noisy_group_is_judged_by_its_refitted_consensus() {
     // A second body's 40 tracks in one group with 20 random walks (σ of the group far above
     // `max_group_sigma`): its rigid consensus is found, refitted, held to the bound on its
     // typical track, and judged; the walks are not taken along. The scene's tracks carry
-    // gross entries (4 per track, 30–60 px), which the trimmed fits ignore.
+    // a gross entry each (30–60 px), which the trimmed fits ignore.
     let (mut meas, truth) = scene(
         30,
         &[(250, Motion::General), (40, Motion::General)],
@@ -835,13 +835,11 @@ fn a_noisy_group_is_judged_by_its_refitted_consensus() {
     );
     let mut rng = StdRng::seed_from_u64(4);
     for p in 0..250 {
-        for _ in 0..1 {
-            let fr = rng.random_range(0..30);
-            let a = std::f64::consts::TAU * rng.random::<f64>();
-            let d = 30.0 + 30.0 * rng.random::<f64>();
-            meas.w[(2 * fr, p)] += d * a.cos();
-            meas.w[(2 * fr + 1, p)] += d * a.sin();
-        }
+        let fr = rng.random_range(0..30);
+        let a = std::f64::consts::TAU * rng.random::<f64>();
+        let d = 30.0 + 30.0 * rng.random::<f64>();
+        meas.w[(2 * fr, p)] += d * a.cos();
+        meas.w[(2 * fr + 1, p)] += d * a.sin();
     }
     let cfg = SegmentConfig::default();
     let ts = TrackSubspace::new(&meas, &cfg.subspace);
@@ -854,27 +852,21 @@ fn a_noisy_group_is_judged_by_its_refitted_consensus() {
             .expect("a subspace")
     };
     let main = fit(&(0..250).collect::<Vec<_>>());
-    let group = |tracks: Vec<usize>| {
+    // The objects judged in one noisy group of `tracks` (σ 10 px, the scene's 0.5 px).
+    let judge = |tracks: Vec<usize>, rng: &mut StdRng| {
         let model = fit(&tracks);
-        ObjectGroup {
+        let group = ObjectGroup {
             tracks,
             rms: 10.0,
             sigma: 10.0,
             model,
             pieces: 1,
-        }
+        };
+        other_objects_among(&meas, &main, 0.5, &[group], &cfg, rng).expect("valid input")
     };
     for seed in 0..3 {
         let mut rng = StdRng::seed_from_u64(seed);
-        let found = other_objects_among(
-            &meas,
-            &main,
-            0.5,
-            &[group((250..310).collect())],
-            &cfg,
-            &mut rng,
-        )
-        .expect("valid input");
+        let found = judge((250..310).collect(), &mut rng);
         assert_eq!(found.len(), 1, "seed {seed}: {} bodies", found.len());
         let on = found[0].tracks.iter().filter(|&&p| truth[p] == 1).count();
         assert!(
@@ -883,15 +875,7 @@ fn a_noisy_group_is_judged_by_its_refitted_consensus() {
             found[0].tracks
         );
         // The walks alone are no body.
-        let found = other_objects_among(
-            &meas,
-            &main,
-            0.5,
-            &[group((290..310).collect())],
-            &cfg,
-            &mut rng,
-        )
-        .expect("valid input");
+        let found = judge((290..310).collect(), &mut rng);
         assert!(found.is_empty(), "seed {seed}: walks taken for a body");
     }
 }
