@@ -2431,14 +2431,26 @@ fn judge_groups<R: Rng + ?Sized>(
     // Each group found: its subspace, its tracks, and whether it held junk (noisier than
     // the bound, judged by its rigid consensus).
     let mut found: Vec<(AffineSubspace, Vec<usize>, bool)> = Vec::new();
+    // The candidates in a group found so far.
+    let mut claimed = vec![false; candidates.len()];
     for g in groups {
         // A group noisier than a rigid body of this video holds junk (random walks,
         // sliding tracks), possibly around an object: only the rigid consensus of its
         // tracks within `max_sigma` (RANSAC over them) is judged.
         let (model, tracks) = if g.sigma <= max_sigma {
-            (g.model.clone(), g.tracks.clone())
+            // Less the tracks a noisy group's consensus took before it.
+            let tracks: Vec<usize> = g.tracks.iter().copied().filter(|&c| !claimed[c]).collect();
+            if tracks.len() < cfg.min_group_tracks {
+                continue;
+            }
+            (g.model.clone(), tracks)
         } else {
-            let tracks_in: Vec<usize> = g.tracks.iter().map(|&c| candidates[c]).collect();
+            // Less the tracks a group found before took (its consensus would be found again).
+            let open: Vec<usize> = g.tracks.iter().copied().filter(|&c| !claimed[c]).collect();
+            if open.len() < cfg.min_group_tracks {
+                continue;
+            }
+            let tracks_in: Vec<usize> = open.iter().map(|&c| candidates[c]).collect();
             let gm = meas.select_tracks(&tracks_in);
             let est = TrackSubspace::new(&gm, &cfg.subspace);
             let rc = crate::robust::ransac::RansacConfig {
@@ -2447,7 +2459,7 @@ fn judge_groups<R: Rng + ?Sized>(
             };
             let Ok(r) = crate::robust::ransac::ransac_observed(
                 &est,
-                g.tracks.len(),
+                open.len(),
                 &rc,
                 rng,
                 &mut crate::NoopObserver,
@@ -2455,14 +2467,44 @@ fn judge_groups<R: Rng + ?Sized>(
             ) else {
                 continue;
             };
-            let members: Vec<usize> = (0..g.tracks.len())
+            let members: Vec<usize> = (0..open.len())
                 .filter(|&i| r.inliers[i])
-                .map(|i| g.tracks[i])
+                .map(|i| open[i])
                 .collect();
             let (Some(m0), true) = (r.model, members.len() >= cfg.min_group_tracks) else {
                 continue;
             };
             let model = ts.refit_with(&m0, &members, cfg.refit_sweeps).unwrap_or(m0);
+            // The object's tracks among junk can be spread over several of the
+            // segmentation's groups (a 300 × 1000 table: its 33 tracks in two groups of junk,
+            // the consensus of each 16 and 18 of them, neither worth a 300-frame subspace
+            // alone): the consensus is every candidate not claimed by a group found before
+            // that the refitted subspace explains within the bound and better than the main
+            // body by the joining margin (below), refitted once more.
+            let within = |model: &AffineSubspace, c: usize| {
+                !claimed[c]
+                    && ts.track_fit(model, c).is_some_and(|o| {
+                        o.rms <= max_sigma
+                            && ts
+                                .track_fit(main, c)
+                                .is_none_or(|m| join_ratio(&o, &m) > 2.0 * ln_n)
+                    })
+            };
+            let wider: Vec<usize> = (0..candidates.len())
+                .filter(|&c| within(&model, c))
+                .collect();
+            let (model, members) = if wider.len() > members.len() {
+                let m = ts
+                    .refit_with(&model, &wider, cfg.refit_sweeps)
+                    .unwrap_or(model);
+                let wider: Vec<usize> = (0..candidates.len()).filter(|&c| within(&m, c)).collect();
+                (m, wider)
+            } else {
+                (model, members)
+            };
+            if members.len() < cfg.min_group_tracks {
+                continue;
+            }
             // The consensus refitted is held to the same bound, on its typical track (the
             // median r², as the segmentation's groups are): junk agrees with a subspace
             // sampled from junk (sliding tracks, random walks), and refitted to all of them
@@ -2479,20 +2521,8 @@ fn judge_groups<R: Rng + ?Sized>(
             }
             (model, members)
         };
-        // Degrees of freedom and residual sums of the group under both models; a track
-        // the main body cannot score at all counts as 9 times its own residual (3σ).
-        let (mut dof, mut rss_own, mut rss_main) = (0.0, 0.0, 0.0);
-        for &c in &tracks {
-            let Some(o) = ts.track_fit(&model, c) else {
-                continue;
-            };
-            let nu = fit_dof(&o);
-            let own = (o.rms * o.rms).max(1e-24);
-            dof += nu;
-            rss_own += nu * own;
-            rss_main += nu * ts.track_fit(main, c).map_or(9.0 * own, |m| m.rms * m.rms);
-        }
-        if ObjectEvidence::of(dof, rss_main, rss_own, ln_n, &model).apart() {
+        if group_evidence(ts, &model, main, &tracks, ln_n).apart() {
+            tracks.iter().for_each(|&c| claimed[c] = true);
             let tracks = tracks.iter().map(|&c| candidates[c]).collect();
             found.push((model, tracks, g.sigma > max_sigma));
         }
@@ -2566,9 +2596,41 @@ fn judge_groups<R: Rng + ?Sized>(
                 },
             );
         }
-        out.retain(|g| g.tracks.len() >= cfg.min_group_tracks);
+        // What is left is judged again, as the group was: the evidence of a group can rest
+        // on members the main body explains as well (their residual sums under the own
+        // subspace are part of the judgement), and a remainder of a few tracks spanning
+        // the group's frames need not be worth its subspace.
+        out.retain(|g| {
+            g.tracks.len() >= cfg.min_group_tracks
+                && group_evidence(&all, &g.model, main, &g.tracks, ln_n).apart()
+        });
     }
     out
+}
+
+/// [`ObjectEvidence`] of `tracks` (indices of `ts`' tracks) under their own subspace `own`
+/// against the main body's `main`: degrees of freedom and residual sums of the tracks
+/// under both models, a track the main body cannot score at all counting as 9 times its
+/// own residual (3σ). `O(Σ_p F_p)` over the tracks' entries.
+fn group_evidence(
+    ts: &TrackSubspace,
+    own: &AffineSubspace,
+    main: &AffineSubspace,
+    tracks: &[usize],
+    ln_n: f64,
+) -> ObjectEvidence {
+    let (mut dof, mut rss_own, mut rss_main) = (0.0, 0.0, 0.0);
+    for &c in tracks {
+        let Some(o) = ts.track_fit(own, c) else {
+            continue;
+        };
+        let nu = fit_dof(&o);
+        let r2 = (o.rms * o.rms).max(1e-24);
+        dof += nu;
+        rss_own += nu * r2;
+        rss_main += nu * ts.track_fit(main, c).map_or(9.0 * r2, |m| m.rms * m.rms);
+    }
+    ObjectEvidence::of(dof, rss_main, rss_own, ln_n, own)
 }
 
 /// The likelihood ratio of a track's fit `own` to an object's subspace against its fit

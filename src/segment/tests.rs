@@ -879,3 +879,59 @@ fn a_noisy_group_is_judged_by_its_refitted_consensus() {
         assert!(found.is_empty(), "seed {seed}: walks taken for a body");
     }
 }
+
+#[test]
+fn an_object_split_over_two_noisy_groups_is_found_whole() {
+    // A second body's 40 tracks spread over two groups of the segmentation, each with 15
+    // random walks (σ far above `max_group_sigma`): the first group's consensus, refitted,
+    // takes the body's tracks of the second group too, and the second group, whose
+    // consensus is then claimed, adds no body. Each half alone is a body (judged apart):
+    // without the widening the result would be two bodies of 20.
+    let (meas, truth) = scene(
+        30,
+        &[(250, Motion::General), (40, Motion::General)],
+        30,
+        0.5,
+        0.0,
+        21,
+    );
+    let cfg = SegmentConfig::default();
+    let ts = TrackSubspace::new(&meas, &cfg.subspace);
+    let fit = |tracks: &[usize]| {
+        let m0 = tracks
+            .windows(4)
+            .find_map(|w| ts.fit(w))
+            .expect("a minimal fit");
+        ts.refit_with(&m0, tracks, cfg.refit_sweeps)
+            .expect("a subspace")
+    };
+    let main = fit(&(0..250).collect::<Vec<_>>());
+    let group = |tracks: Vec<usize>| ObjectGroup {
+        model: fit(&tracks),
+        tracks,
+        rms: 10.0,
+        sigma: 10.0,
+        pieces: 1,
+    };
+    // Body tracks 250..270 with walks 290..305; body tracks 270..290 with walks 305..320.
+    let groups = [
+        group((250..270).chain(290..305).collect()),
+        group((270..290).chain(305..320).collect()),
+    ];
+    for seed in 0..3 {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let found =
+            other_objects_among(&meas, &main, 0.5, &groups, &cfg, &mut rng).expect("valid input");
+        assert_eq!(found.len(), 1, "seed {seed}: {} bodies", found.len());
+        let on = found[0].tracks.iter().filter(|&&p| truth[p] == 1).count();
+        assert!(
+            on >= 39 && found[0].tracks.len() == on,
+            "seed {seed}: {on} of the body's 40 tracks, group {:?}",
+            found[0].tracks
+        );
+        // Each half alone is judged a body: the test above is the widening's.
+        let half = other_objects_among(&meas, &main, 0.5, &groups[1..], &cfg, &mut rng)
+            .expect("valid input");
+        assert_eq!(half.len(), 1, "seed {seed}: the second half alone");
+    }
+}
