@@ -101,6 +101,17 @@ fn scene(
     (Measurements::new(w, visible), truth)
 }
 
+/// The subspace of `tracks` (indices of `ts`' tracks), refitted from the first minimal fit
+/// of 4 consecutive ones.
+fn fit_subspace(ts: &TrackSubspace, cfg: &SegmentConfig, tracks: &[usize]) -> AffineSubspace {
+    let m0 = tracks
+        .windows(4)
+        .find_map(|w| ts.fit(w))
+        .expect("a minimal fit");
+    ts.refit_with(&m0, tracks, cfg.refit_sweeps)
+        .expect("a subspace")
+}
+
 /// [`segment`] with the default settings (RNG seed 7), checked to find `k` groups.
 fn segment_with_count(meas: &Measurements, k: usize) -> Segmentation {
     let seg = segment(
@@ -843,14 +854,7 @@ fn a_noisy_group_is_judged_by_its_refitted_consensus() {
     }
     let cfg = SegmentConfig::default();
     let ts = TrackSubspace::new(&meas, &cfg.subspace);
-    let fit = |tracks: &[usize]| {
-        let m0 = tracks
-            .windows(4)
-            .find_map(|w| ts.fit(w))
-            .expect("a minimal fit");
-        ts.refit_with(&m0, tracks, cfg.refit_sweeps)
-            .expect("a subspace")
-    };
+    let fit = |tracks: &[usize]| fit_subspace(&ts, &cfg, tracks);
     let main = fit(&(0..250).collect::<Vec<_>>());
     // The objects judged in one noisy group of `tracks` (σ 10 px, the scene's 0.5 px).
     let judge = |tracks: Vec<usize>, rng: &mut StdRng| {
@@ -897,14 +901,7 @@ fn an_object_split_over_two_noisy_groups_is_found_whole() {
     );
     let cfg = SegmentConfig::default();
     let ts = TrackSubspace::new(&meas, &cfg.subspace);
-    let fit = |tracks: &[usize]| {
-        let m0 = tracks
-            .windows(4)
-            .find_map(|w| ts.fit(w))
-            .expect("a minimal fit");
-        ts.refit_with(&m0, tracks, cfg.refit_sweeps)
-            .expect("a subspace")
-    };
+    let fit = |tracks: &[usize]| fit_subspace(&ts, &cfg, tracks);
     let main = fit(&(0..250).collect::<Vec<_>>());
     let group = |tracks: Vec<usize>| ObjectGroup {
         model: fit(&tracks),
