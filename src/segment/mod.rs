@@ -125,7 +125,7 @@ use rand::{Rng, RngExt};
 use rayon::prelude::*;
 
 use crate::robust::ransac::Estimator;
-use crate::robust::subspace::{AffineSubspace, SubspaceConfig, TrackSubspace};
+use crate::robust::subspace::{AffineSubspace, SubspaceConfig, TrackFit, TrackSubspace};
 use crate::{Error, Measurements, Result};
 pub use perspective::MergeTest;
 
@@ -2433,23 +2433,23 @@ fn judge_groups<R: Rng + ?Sized>(
     let mut found: Vec<(AffineSubspace, Vec<usize>, bool)> = Vec::new();
     // The candidates in a group found so far.
     let mut claimed = vec![false; candidates.len()];
+    // Each candidate's fit to the main body, used by every group's judgement.
+    let main_fit: Vec<_> = (0..candidates.len())
+        .map(|c| ts.track_fit(main, c))
+        .collect();
     for g in groups {
+        // The group less the tracks a group found before took (a noisy group's consensus
+        // would be found again).
+        let open: Vec<usize> = g.tracks.iter().copied().filter(|&c| !claimed[c]).collect();
+        if open.len() < cfg.min_group_tracks {
+            continue;
+        }
         // A group noisier than a rigid body of this video holds junk (random walks,
         // sliding tracks), possibly around an object: only the rigid consensus of its
         // tracks within `max_sigma` (RANSAC over them) is judged.
         let (model, tracks) = if g.sigma <= max_sigma {
-            // Less the tracks a noisy group's consensus took before it.
-            let tracks: Vec<usize> = g.tracks.iter().copied().filter(|&c| !claimed[c]).collect();
-            if tracks.len() < cfg.min_group_tracks {
-                continue;
-            }
-            (g.model.clone(), tracks)
+            (g.model.clone(), open)
         } else {
-            // Less the tracks a group found before took (its consensus would be found again).
-            let open: Vec<usize> = g.tracks.iter().copied().filter(|&c| !claimed[c]).collect();
-            if open.len() < cfg.min_group_tracks {
-                continue;
-            }
             let tracks_in: Vec<usize> = open.iter().map(|&c| candidates[c]).collect();
             let gm = meas.select_tracks(&tracks_in);
             let est = TrackSubspace::new(&gm, &cfg.subspace);
@@ -2485,9 +2485,7 @@ fn judge_groups<R: Rng + ?Sized>(
                 !claimed[c]
                     && ts.track_fit(model, c).is_some_and(|o| {
                         o.rms <= max_sigma
-                            && ts
-                                .track_fit(main, c)
-                                .is_none_or(|m| join_ratio(&o, &m) > 2.0 * ln_n)
+                            && main_fit[c].is_none_or(|m| join_ratio(&o, &m) > 2.0 * ln_n)
                     })
             };
             let wider: Vec<usize> = (0..candidates.len())
@@ -2521,7 +2519,10 @@ fn judge_groups<R: Rng + ?Sized>(
             }
             (model, members)
         };
-        if group_evidence(ts, &model, main, &tracks, ln_n).apart() {
+        let fits = tracks
+            .iter()
+            .filter_map(|&c| Some((ts.track_fit(&model, c)?, main_fit[c])));
+        if group_evidence(fits, &model, ln_n).apart() {
             tracks.iter().for_each(|&c| claimed[c] = true);
             let tracks = tracks.iter().map(|&c| candidates[c]).collect();
             found.push((model, tracks, g.sigma > max_sigma));
@@ -2587,48 +2588,46 @@ fn judge_groups<R: Rng + ?Sized>(
     out.sort_by_key(|g| std::cmp::Reverse(g.tracks.len()));
     if members_beat_main {
         // A member the main body explains as well (by the joining margin) is no evidence
-        // of the object: it stays with the main body.
-        for g in &mut out {
-            g.tracks.retain(
-                |&p| match (all.track_fit(&g.model, p), all.track_fit(main, p)) {
-                    (Some(o), Some(m)) => join_ratio(&o, &m) > 2.0 * ln_n,
-                    _ => true,
-                },
-            );
-        }
-        // What is left is judged again, as the group was: the evidence of a group can rest
+        // of the object: it stays with the main body. What is left is judged again, as the
+        // group was: the evidence of a group can rest
         // on members the main body explains as well (their residual sums under the own
         // subspace are part of the judgement), and a remainder of a few tracks spanning
         // the group's frames need not be worth its subspace.
-        out.retain(|g| {
-            g.tracks.len() >= cfg.min_group_tracks
-                && group_evidence(&all, &g.model, main, &g.tracks, ln_n).apart()
+        out.retain_mut(|g| {
+            // The members kept, with their fits to the object and to the main body.
+            let kept: Vec<_> = g
+                .tracks
+                .iter()
+                .map(|&p| (p, all.track_fit(&g.model, p), all.track_fit(main, p)))
+                .filter(|(_, o, m)| match (o, m) {
+                    (Some(o), Some(m)) => join_ratio(o, m) > 2.0 * ln_n,
+                    _ => true,
+                })
+                .collect();
+            g.tracks = kept.iter().map(|k| k.0).collect();
+            let fits = kept.iter().filter_map(|&(_, o, m)| Some((o?, m)));
+            g.tracks.len() >= cfg.min_group_tracks && group_evidence(fits, &g.model, ln_n).apart()
         });
     }
     out
 }
 
-/// [`ObjectEvidence`] of `tracks` (indices of `ts`' tracks) under their own subspace `own`
-/// against the main body's `main`: degrees of freedom and residual sums of the tracks
-/// under both models, a track the main body cannot score at all counting as 9 times its
-/// own residual (3σ). `O(Σ_p F_p)` over the tracks' entries.
+/// [`ObjectEvidence`] of a group under its own subspace `own` against the main body's, from
+/// its tracks' fits `(to own, to the main body)`: degrees of freedom and residual sums under
+/// both models, a track the main body cannot score at all counting as 9 times its own
+/// residual (3σ). `O(n)` in the fits.
 fn group_evidence(
-    ts: &TrackSubspace,
+    fits: impl Iterator<Item = (TrackFit, Option<TrackFit>)>,
     own: &AffineSubspace,
-    main: &AffineSubspace,
-    tracks: &[usize],
     ln_n: f64,
 ) -> ObjectEvidence {
     let (mut dof, mut rss_own, mut rss_main) = (0.0, 0.0, 0.0);
-    for &c in tracks {
-        let Some(o) = ts.track_fit(own, c) else {
-            continue;
-        };
+    for (o, m) in fits {
         let nu = fit_dof(&o);
         let r2 = (o.rms * o.rms).max(1e-24);
         dof += nu;
         rss_own += nu * r2;
-        rss_main += nu * ts.track_fit(main, c).map_or(9.0 * r2, |m| m.rms * m.rms);
+        rss_main += nu * m.map_or(9.0 * r2, |m| m.rms * m.rms);
     }
     ObjectEvidence::of(dof, rss_main, rss_own, ln_n, own)
 }
