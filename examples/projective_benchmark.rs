@@ -12,7 +12,9 @@
 //! * `A+B` (each `poseETA` or `direct`): both chains from the same affine optimum, the one
 //!   of lower final cost kept (`ProjectiveConfig::second_bridge`);
 //! * `poseETA-joint` / `direct-joint`: the same with a joint (Schur, damped points, no
-//!   point re-solve) projective Levenberg–Marquardt instead of VarPro.
+//!   point re-solve) projective Levenberg–Marquardt instead of VarPro;
+//! * `VARIANT^E1^E2…` (each `E` `poseETA` or `direct`): after the chain, escapes from its
+//!   adjusted end, in turn (`ProjectiveConfig::escapes`), e.g. `pose0.01+pose0.1^pose0.01^pose0.1`.
 //!
 //! `MATRICES=name:path:best,...` adds more measurement matrices (rank3's text matrix: 2F rows,
 //! `nan` where unobserved) with their best known projective RMS — e.g. the other data sets of
@@ -44,6 +46,10 @@ fn variant(name: &str) -> Option<ProjectiveConfig> {
         sturm_triggs: false,
         ..ProjectiveConfig::default()
     };
+    // `CHAIN^E1^E2…`: the chain, then escapes from its adjusted end
+    // (`ProjectiveConfig::escapes`), each `poseETA` or `direct`.
+    let mut parts = name.split('^');
+    let name = parts.next()?;
     let (base, joint) = match name.strip_suffix("-joint") {
         Some(b) => (b, true),
         None => (name, false),
@@ -64,6 +70,7 @@ fn variant(name: &str) -> Option<ProjectiveConfig> {
     };
     cfg.bridge = first;
     cfg.second_bridge = second;
+    cfg.escapes = parts.map(bridge).collect::<Option<Vec<_>>>()?;
     if joint {
         cfg.refine.damp_points = true;
         cfg.refine.resolve_points = false;

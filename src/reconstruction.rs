@@ -347,6 +347,9 @@ pub struct ProjectiveResult {
     /// it ended, which one the adjustment started from.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub bridges: Vec<projective::BridgeOutcome>,
+    /// The escapes tried after the adjustment ([`projective::ProjectiveConfig::escapes`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub escapes: Vec<projective::EscapeOutcome>,
     /// The fitted model (fit frames × fit tracks), for library users.
     #[serde(skip)]
     pub model: projective::ProjectiveModel,
@@ -427,6 +430,7 @@ impl ProjectiveResult {
             points: points.into_iter().map(|(_, p)| p).collect(),
             schur_nnz: pf.schur_nnz,
             bridges: pf.bridges,
+            escapes: pf.escapes,
             model,
             outlier_points,
         }
@@ -500,6 +504,7 @@ impl ProjectiveResult {
             points,
             schur_nnz: pf.schur_nnz,
             bridges: pf.bridges,
+            escapes: pf.escapes,
             model,
             outlier_points,
         }

@@ -289,11 +289,11 @@ pub fn print_report(rec: &Reconstruction) {
                 s.seconds
             );
         }
+        let name = |b: &rank3::projective::Bridge| match b {
+            rank3::projective::Bridge::Direct => "direct".to_string(),
+            rank3::projective::Bridge::Pose { eta } => format!("pOSE η = {eta}"),
+        };
         if !p.bridges.is_empty() {
-            let name = |b: &rank3::projective::Bridge| match b {
-                rank3::projective::Bridge::Direct => "direct".to_string(),
-                rank3::projective::Bridge::Pose { eta } => format!("pOSE η = {eta}"),
-            };
             info!(
                 "projective bridges from the affine start: {} (the adjustment started from the \
                  lower; the stages above are its)",
@@ -309,6 +309,19 @@ pub fn print_report(rec: &Reconstruction) {
                     ))
                     .collect::<Vec<_>>()
                     .join(", ")
+            );
+        }
+        for e in &p.escapes {
+            info!(
+                "projective escape by {} from RMS {:.6} px: bridge → {:.6} px, adjustment → \
+                 {:.6} px ({} iterations, {:.3} s){}",
+                name(&e.bridge),
+                e.from_rms_px,
+                e.bridge_rms_px,
+                e.rms_px,
+                e.iterations,
+                e.seconds,
+                if e.kept { ", kept" } else { ", not lower" }
             );
         }
     }

@@ -136,6 +136,18 @@ pub struct ProjectiveConfig {
     /// rejected steps (Wilshire, 190 frames: over 300 iterations without it, 112 to the best
     /// known optimum with it; docs/results.md).
     pub refine: LmConfig,
+    /// Escapes from the adjusted end, tried in turn after the adjustment from an affine
+    /// start: each bridge runs again from the adjusted cameras (its points re-solved for
+    /// them), the adjustment runs from where it ends, and the model of lower cost is kept
+    /// ([`ProjectiveFit::escapes`] reports each). A homotopy restart: the bridge's
+    /// objective, whose affine share smooths the projective cost, moves the cameras out of
+    /// a local minimum whose basin the affine start led into. Default empty (none): each
+    /// escape costs a bridge and an adjustment. Measured from random starts (docs/results.md,
+    /// 2026-12-03): with `[pOSE 0.01, pOSE 0.1]` Hong et al.'s open and loop-closed spheres
+    /// seen from closest (S10.5, S10.5L) went from 45/50 to 48/50 each, and Blue bear's
+    /// failed starts reached the optimum's basin in 5 of 8, at 2–3 times the time per start.
+    #[serde(default)]
+    pub escapes: Vec<Bridge>,
 }
 
 fn default_second_bridge() -> Option<Bridge> {
@@ -159,6 +171,7 @@ impl Default for ProjectiveConfig {
                 geodesic_acceleration: 0.75,
                 ..LmConfig::default()
             },
+            escapes: Vec::new(),
         }
     }
 }
@@ -169,7 +182,13 @@ impl ProjectiveConfig {
         for (field, b) in [
             ("projective.bridge", Some(self.bridge)),
             ("projective.second_bridge", self.second_bridge),
-        ] {
+        ]
+        .into_iter()
+        .chain(
+            self.escapes
+                .iter()
+                .map(|b| ("projective.escapes", Some(*b))),
+        ) {
             if let Some(Bridge::Pose { eta }) = b
                 && !(eta > 0.0 && eta <= 1.0)
             {
@@ -344,6 +363,25 @@ pub struct ProjectiveFit {
     /// With [`ProjectiveConfig::second_bridge`], each bridge tried from the affine start
     /// (the configured one first); empty when one ran.
     pub bridges: Vec<BridgeOutcome>,
+    /// With [`ProjectiveConfig::escapes`], each escape tried after the adjustment, in order.
+    pub escapes: Vec<EscapeOutcome>,
+}
+
+/// One escape tried from the adjusted end ([`ProjectiveConfig::escapes`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EscapeOutcome {
+    pub bridge: Bridge,
+    /// Reprojection RMS of the model escaped from (the best so far), pixels.
+    pub from_rms_px: f64,
+    /// Where the bridge ended (the adjustment's start), pixels (NaN when it failed).
+    pub bridge_rms_px: f64,
+    /// Where the adjustment after it ended, pixels (NaN when it failed).
+    pub rms_px: f64,
+    /// Iterations of the bridge and the adjustment together.
+    pub iterations: usize,
+    pub seconds: f64,
+    /// Whether the model it reached was lower and replaced the one escaped from.
+    pub kept: bool,
 }
 
 /// One bridge tried from the affine start ([`ProjectiveConfig::second_bridge`]).
@@ -636,10 +674,78 @@ pub fn fit(
             observer,
         )?;
         fit.bridges = end.outcomes;
+        escape(&g, &norm, px, &mut fit, cfg, end.run, observer);
         return Ok(fit);
     };
 
     bundle_adjust(&g, &norm, cams, pts, start, stages, cfg, run, observer)
+}
+
+/// [`ProjectiveConfig::escapes`]: from the adjusted model in `fit`, each bridge in turn
+/// (pOSE re-solves the points for the adjusted cameras; the direct bridge starts from the
+/// model's affine points `X/w`), then the adjustment; the lower model replaces `fit`'s
+/// (its stages and report with it, the affine stage's bridges kept). A bridge or adjustment
+/// that fails is reported and loses. Cost: one bridge and one adjustment per escape, each
+/// linear in the observations per iteration as in [`fit`].
+#[allow(clippy::too_many_arguments)]
+fn escape(
+    g: &Graph,
+    norm: &Normalization,
+    px: f64,
+    fit: &mut ProjectiveFit,
+    cfg: &ProjectiveConfig,
+    run: usize,
+    observer: &mut dyn Observer,
+) {
+    let n_scalars = (2 * g.n_obs()).max(1) as f64;
+    for &b in &cfg.escapes {
+        let t0 = Instant::now();
+        let (cams, pts) = normalized_start(&fit.model, norm);
+        // Finite affine points for the bridge's parameterisation; a point at infinity is
+        // pushed far along its direction (pOSE re-solves every point first).
+        let mut x3 = Vec::with_capacity(3 * g.n_pts);
+        for v in pts.chunks(4) {
+            let w = if v[3].abs() > 1e-9 {
+                v[3]
+            } else {
+                1e-9_f64.copysign(v[3])
+            };
+            x3.extend_from_slice(&[v[0] / w, v[1] / w, v[2] / w]);
+        }
+        let mut stages = Vec::new();
+        let mut outcome = EscapeOutcome {
+            bridge: b,
+            from_rms_px: fit.rms_px,
+            bridge_rms_px: f64::NAN,
+            rms_px: f64::NAN,
+            iterations: 0,
+            seconds: 0.0,
+            kept: false,
+        };
+        let end = bridge(g, px, cams, x3, b, cfg, run, observer, &mut stages);
+        let adjusted = end.ok().and_then(|(c, x)| {
+            let cost = bundle::cost(&models::Projective, g, &c, &x, &[]);
+            outcome.bridge_rms_px = (cost / n_scalars).sqrt() * px;
+            outcome.iterations = stages.iter().map(|s| s.iterations).sum();
+            bundle_adjust(g, norm, c, x, fit.start, stages, cfg, run, observer).ok()
+        });
+        outcome.seconds = t0.elapsed().as_secs_f64();
+        if let Some(mut f) = adjusted {
+            outcome.rms_px = f.rms_px;
+            outcome.iterations += f.report.iterations;
+            if f.rms_px < fit.rms_px {
+                outcome.kept = true;
+                f.bridges = std::mem::take(&mut fit.bridges);
+                f.escapes = std::mem::take(&mut fit.escapes);
+                // The chain that led here: the stages escaped from, then this escape's.
+                let mut chain = std::mem::take(&mut fit.stages);
+                chain.append(&mut f.stages);
+                f.stages = chain;
+                *fit = f;
+            }
+        }
+        fit.escapes.push(outcome);
+    }
 }
 
 /// Where [`bridges`] leaves the adjustment to start: cameras and points (projective
@@ -1178,6 +1284,7 @@ fn bundle_adjust(
         report: r.report,
         schur_nnz: r.schur_nnz,
         bridges: Vec::new(),
+        escapes: Vec::new(),
     })
 }
 

@@ -441,3 +441,87 @@ fn linear_triangulation_avoids_a_common_camera_centre() {
         assert!(rms < 3e-3, "reprojection RMS {rms} of {y:?}");
     }
 }
+
+/// `escapes`: from where the adjustment stopped, a pOSE bridge from the adjusted cameras
+/// and a second adjustment; the lower model is kept and reported, with the chain of stages
+/// that led to it. Here the first adjustment is cut short (3 iterations from a random
+/// affine start), so the escape has somewhere lower to go; without escapes nothing is
+/// tried.
+#[test]
+fn an_escape_from_the_adjusted_end_keeps_the_lower_model() {
+    let (meas, _, _) = scene(16, 80, 2.5, 0.4, 12);
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    let mut rng = StdRng::seed_from_u64(3);
+    let m = Mat::from_fn(2 * nf, 3, |_, _| rng.random_range(-1.0..1.0));
+    let s = Mat::from_fn(3, np, |_, _| rng.random_range(-1.0..1.0));
+    let t: Vec<f64> = (0..2 * nf)
+        .map(|i| if i % 2 == 0 { 320.0 } else { 240.0 })
+        .collect();
+    let cut = ProjectiveConfig {
+        sturm_triggs: false,
+        bridge: Bridge::Direct,
+        second_bridge: None,
+        refine: LmConfig {
+            max_iterations: 3,
+            ..ProjectiveConfig::default().refine
+        },
+        ..ProjectiveConfig::default()
+    };
+    let go = |cfg: &ProjectiveConfig| {
+        let start = AffineStart {
+            m: m.as_ref(),
+            s: s.as_ref(),
+            t: &t,
+        };
+        fit(&meas, start, cfg, 0, &mut NoopObserver).unwrap()
+    };
+    let plain = go(&cut);
+    assert!(plain.escapes.is_empty());
+    let escaped = go(&ProjectiveConfig {
+        escapes: vec![Bridge::Pose { eta: 0.01 }, Bridge::Direct],
+        ..cut.clone()
+    });
+    assert_eq!(escaped.escapes.len(), 2);
+    let e = &escaped.escapes[0];
+    assert_eq!(e.bridge, Bridge::Pose { eta: 0.01 });
+    assert_eq!(e.from_rms_px.to_bits(), plain.rms_px.to_bits());
+    assert!(e.kept, "{e:?} from {}", plain.rms_px);
+    assert!(e.bridge_rms_px.is_finite() && e.iterations > 3);
+    // The second escape starts from the first's model.
+    assert_eq!(escaped.escapes[1].from_rms_px.to_bits(), e.rms_px.to_bits());
+    let kept_last = escaped.escapes.iter().rev().find(|e| e.kept).unwrap();
+    assert_eq!(escaped.rms_px.to_bits(), kept_last.rms_px.to_bits());
+    assert!(
+        escaped.rms_px < 0.5 * plain.rms_px,
+        "{} against {}",
+        escaped.rms_px,
+        plain.rms_px
+    );
+    assert!((escaped.model.rms(&meas) - escaped.rms_px).abs() < 1e-9 * plain.rms_px.max(1.0));
+    // The stages: the chain escaped from, then the escape's bridge and adjustment.
+    let names: Vec<&str> = escaped.stages.iter().map(|s| s.stage.as_str()).collect();
+    assert_eq!(
+        &names[..plain.stages.len()],
+        &plain
+            .stages
+            .iter()
+            .map(|s| s.stage.as_str())
+            .collect::<Vec<_>>()[..]
+    );
+    assert!(
+        names.ends_with(&["projective-ba"]) && names.contains(&"pose"),
+        "{names:?}"
+    );
+    // A bad weight is refused by name.
+    let bad = ProjectiveConfig {
+        escapes: vec![Bridge::Pose { eta: 0.0 }],
+        ..ProjectiveConfig::default()
+    };
+    assert!(matches!(
+        bad.validate(),
+        Err(Error::InvalidConfig {
+            field: "projective.escapes",
+            ..
+        })
+    ));
+}
