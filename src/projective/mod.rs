@@ -136,8 +136,9 @@ pub struct ProjectiveConfig {
     /// rejected steps (Wilshire, 190 frames: over 300 iterations without it, 112 to the best
     /// known optimum with it; docs/results.md).
     pub refine: LmConfig,
-    /// Escapes from the adjusted end, tried in turn after the adjustment from an affine
-    /// start: each bridge runs again from the adjusted cameras (its points re-solved for
+    /// Escapes from the adjusted end, tried in turn after [`fit`]'s adjustment from an
+    /// affine start (not after the Sturm–Triggs start, [`refine`] or the windows of long
+    /// sequences): each bridge runs again from the adjusted cameras (its points re-solved for
     /// them), the adjustment runs from where it ends, and the model of lower cost is kept
     /// ([`ProjectiveFit::escapes`] reports each). A homotopy restart: the bridge's
     /// objective, whose affine share smooths the projective cost, moves the cameras out of
