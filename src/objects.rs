@@ -177,7 +177,7 @@ pub fn object_dir(k: usize) -> String {
 }
 
 /// Segments `table`'s tracks and reconstructs each group with `config` (seeded by
-/// `config.seed`). Errors: those of [`segment`] (bad configuration, too few tracks); a
+/// `config.seed`). Errors: those of [`crate::segment::segment`] (bad configuration, too few tracks); a
 /// group whose reconstruction fails is reported in its [`ObjectResult`] instead.
 pub fn reconstruct_objects(
     table: &TrackTable,

@@ -259,7 +259,7 @@ pub struct ProjectiveJudgement {
     pub objects_held_out: usize,
     /// Flagged entries the last verdict would readmit that stay flagged (and out of the
     /// fit) because refitting for them could not move the fit beyond its noise
-    /// ([`readmission_within_noise`]).
+    /// (`readmission_within_noise`).
     pub readmissions_not_refitted: usize,
 }
 

@@ -117,7 +117,7 @@
 //! (`O(n_obs)`; [`segment_table`] reads a sparse table without the dense `W` that
 //! [`segment`]'s input is), the hypotheses' subspaces `O(F)` each. The O(N²) neighbour
 //! pre-selection dominates beyond ~10⁴ tracks in one segmentation; a long sequence of
-//! short tracks is segmented by windows ([`windows`]), each with the tracks it sees.
+//! short tracks is segmented by windows (the module `windows`), each with the tracks it sees.
 
 use std::time::Instant;
 
@@ -754,7 +754,7 @@ pub fn segment<R: Rng + ?Sized>(
 
 /// [`segment`] of a sparse table's tracks, without its dense `2F × N` matrix: memory
 /// `O(n_obs)` beside what the segmentation itself holds (on a long sequence of short
-/// tracks, one window's at a time; see [`windows`]).
+/// tracks, one window's at a time; see the module `windows`).
 ///
 /// Errors: as [`segment`].
 pub fn segment_table<R: Rng + ?Sized>(
@@ -788,7 +788,7 @@ fn segment_estimator<R: Rng + ?Sized>(
 
 /// [`segment_table`] of a table whose tracks are segmented whole: `None` (at the cost of
 /// building the tracks' subspace index only) when the table would be segmented window by
-/// window ([`windows::plan`]: a long sequence of short tracks, whose groups are matched
+/// window (`windows::plan`: a long sequence of short tracks, whose groups are matched
 /// across windows).
 ///
 /// Errors: as [`segment`].
