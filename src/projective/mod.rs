@@ -625,7 +625,6 @@ pub fn fit(
     let norm = Normalization::of(meas);
     let g = graph(meas, &norm);
     let px = 1.0 / norm.scale;
-    let n_scalars = (2 * g.n_obs()).max(1) as f64;
     let mut stages = Vec::new();
 
     // Start: cameras (12 per frame) and points (4 per track), normalized coordinates.
@@ -637,7 +636,7 @@ pub fn fit(
         let st = sturm_triggs::run(&g, cfg.sturm_triggs_iterations)?;
         let mut c = st.cameras;
         let mut x = st.points;
-        let before = (bundle::cost(&models::Projective, &g, &c, &x, &[]) / n_scalars).sqrt() * px;
+        let before = rms_of_cost(&g, px, bundle::cost(&models::Projective, &g, &c, &x, &[]));
         for v in c.chunks_mut(12) {
             bundle::normalize(v);
         }
@@ -662,7 +661,7 @@ pub fn fit(
         (c, x, Start::SturmTriggs)
     } else {
         let (c, x) = affine_start(&affine, &norm);
-        let end = bridges(&g, px, n_scalars, c, x, cfg, run, observer, &mut stages)?;
+        let end = bridges(&g, px, c, x, cfg, run, observer, &mut stages)?;
         let mut fit = bundle_adjust(
             &g,
             &norm,
@@ -682,6 +681,12 @@ pub fn fit(
     bundle_adjust(&g, &norm, cams, pts, start, stages, cfg, run, observer)
 }
 
+/// Reprojection RMS of `cost` (a sum of squared residuals over `g`'s observed scalars),
+/// `scale` units per normalized unit (pixels: `1 / norm.scale`).
+fn rms_of_cost(g: &Graph, scale: f64, cost: f64) -> f64 {
+    (cost / (2 * g.n_obs()).max(1) as f64).sqrt() * scale
+}
+
 /// [`ProjectiveConfig::escapes`]: from the adjusted model in `fit`, each bridge in turn
 /// (pOSE re-solves the points for the adjusted cameras; the direct bridge starts from the
 /// model's affine points `X/w`), then the adjustment; the lower model replaces `fit`'s
@@ -698,7 +703,6 @@ fn escape(
     run: usize,
     observer: &mut dyn Observer,
 ) {
-    let n_scalars = (2 * g.n_obs()).max(1) as f64;
     for &b in &cfg.escapes {
         let t0 = Instant::now();
         let (cams, pts) = normalized_start(&fit.model, norm);
@@ -726,7 +730,7 @@ fn escape(
         let end = bridge(g, px, cams, x3, b, cfg, run, observer, &mut stages);
         let adjusted = end.ok().and_then(|(c, x)| {
             let cost = bundle::cost(&models::Projective, g, &c, &x, &[]);
-            outcome.bridge_rms_px = (cost / n_scalars).sqrt() * px;
+            outcome.bridge_rms_px = rms_of_cost(g, px, cost);
             outcome.iterations = stages.iter().map(|s| s.iterations).sum();
             bundle_adjust(g, norm, c, x, fit.start, stages, cfg, run, observer).ok()
         });
@@ -767,7 +771,6 @@ struct BridgeEnd {
 fn bridges(
     g: &Graph,
     px: f64,
-    n_scalars: f64,
     c: Vec<f64>,
     x: Vec<f64>,
     cfg: &ProjectiveConfig,
@@ -794,7 +797,7 @@ fn bridges(
         });
         let outcome = BridgeOutcome {
             bridge: b,
-            start_rms_px: (cost / n_scalars).sqrt() * px,
+            start_rms_px: rms_of_cost(g, px, cost),
             iterations: st.iter().map(|s| s.iterations).sum(),
             seconds: t0.elapsed().as_secs_f64(),
             kept: false,
@@ -1258,7 +1261,6 @@ fn bundle_adjust(
     observer: &mut dyn Observer,
 ) -> Result<ProjectiveFit> {
     let px = 1.0 / norm.scale;
-    let n_scalars = (2 * g.n_obs()).max(1) as f64;
     let stage = Stage {
         name: "projective-ba",
         what: "projective bundle adjustment",
@@ -1275,7 +1277,7 @@ fn bundle_adjust(
         observer,
         &mut stages,
     )?;
-    let rms_px = (r.report.final_cost / n_scalars).sqrt() * px;
+    let rms_px = rms_of_cost(g, px, r.report.final_cost);
     let model = to_pixels(&cams, &pts, g, norm);
     Ok(ProjectiveFit {
         model,
@@ -1314,8 +1316,7 @@ impl Stage {
         observer: &mut dyn Observer,
         stages: &mut Vec<StageReport>,
     ) -> Result<bundle::LmResult> {
-        let n_scalars = (2 * g.n_obs()).max(1) as f64;
-        let rms = |cost: f64| (cost / n_scalars).sqrt() * self.rms_scale;
+        let rms = |cost: f64| rms_of_cost(g, self.rms_scale, cost);
         let t0 = Instant::now();
         observer.on_event(&Event::StageStarted { stage: self.name });
         let before = rms(bundle::cost(model, g, cams, pts, glob));
