@@ -2773,8 +2773,9 @@ fn fit_selection(
         // fit's cameras.
         let mut pcfg = config.projective.clone();
         if config.camera.is_perspective() {
-            // Only a start for the perspective stages: one chain.
+            // Only a start for the perspective stages: one chain, no escapes.
             pcfg.second_bridge = None;
+            pcfg.escapes.clear();
             let cap = if warm.is_some() {
                 config.perspective.projective_refit_iterations
             } else {
@@ -2913,8 +2914,9 @@ fn part_pretest(
         t: &c.t,
     };
     let mut pcfg = config.projective.clone();
-    // The pre-test only compares costs: one chain.
+    // The pre-test only compares costs: one chain, no escapes.
     pcfg.second_bridge = None;
+    pcfg.escapes.clear();
     pcfg.refine.noise_tolerance = pcfg.refine.noise_tolerance.max(PRETEST_CHI2_PRECISION);
     pcfg.refine.noise_window = pcfg.refine.noise_window.min(PRETEST_WINDOW);
     let pf = projective::fit(meas, start, &pcfg, 0, &mut crate::NoopObserver).ok()?;

@@ -537,6 +537,7 @@ fn fit_window(
             ..projective_cfg.refine.clone()
         },
         second_bridge: None,
+        escapes: Vec::new(),
         ..projective_cfg.clone()
     };
     let proj = projective::fit(

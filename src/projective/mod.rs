@@ -134,7 +134,14 @@ pub struct ProjectiveConfig {
     /// `α = 0.75` ([`LmConfig::geodesic_acceleration`]): on long sequences with missing data
     /// the adjustment otherwise crawls along a curved valley, alternating accepted and
     /// rejected steps (Wilshire, 190 frames: over 300 iterations without it, 112 to the best
-    /// known optimum with it; docs/results.md).
+    /// known optimum with it; docs/results.md); 3 step extensions
+    /// ([`LmConfig::extension_trials`]) and the long-tail stop at `10⁻⁷` of the cost per
+    /// window ([`LmConfig::window_relative_tolerance`], `10⁻⁶` in [`LmConfig::default`]):
+    /// near Blue bear's optimum the adjustment lowers the cost by ~10⁻⁶ of itself per
+    /// window for over a hundred steps, so the `10⁻⁶` rule stopped it 2·10⁻⁶ of the RMS
+    /// above the optimum, outside the benchmark's 10⁻⁶ (docs/results.md, 2026-12-03).
+    /// [`fit_observations`] (long sequences) keeps the tail at no less than
+    /// [`LONG_TAIL_TOLERANCE`].
     pub refine: LmConfig,
     /// Escapes from the adjusted end, tried in turn after [`fit`]'s adjustment from an
     /// affine start (not after the Sturm–Triggs start, [`refine`] or the windows of long
@@ -142,17 +149,24 @@ pub struct ProjectiveConfig {
     /// them), the adjustment runs from where it ends, and the model of lower cost is kept
     /// ([`ProjectiveFit::escapes`] reports each). A homotopy restart: the bridge's
     /// objective, whose affine share smooths the projective cost, moves the cameras out of
-    /// a local minimum whose basin the affine start led into. Default empty (none): each
-    /// escape costs a bridge and an adjustment. Measured from random starts (docs/results.md,
-    /// 2026-12-03): with `[pOSE 0.01, pOSE 0.1]` Hong et al.'s open and loop-closed spheres
-    /// seen from closest (S10.5, S10.5L) went from 45/50 to 48/50 each, and Blue bear's
-    /// failed starts reached the optimum's basin in 5 of 8, at 2–3 times the time per start.
-    #[serde(default)]
+    /// a local minimum whose basin the affine start led into. Default `[pOSE η = 0.01,
+    /// pOSE η = 0.1]` (the two bridges of the chain). Measured from random starts
+    /// (docs/results.md, 2026-12-03): Hong et al.'s open and loop-closed spheres seen from
+    /// closest (S10.5, S10.5L) went from 45/50 to 48/50 each, and Blue bear's failed starts
+    /// reached the optimum's basin in 5 of 8; every escape costs a bridge and an adjustment,
+    /// 1.7–3 times the time per start (dino_trimmed 0.36 → 0.61 s). Empty: none. Like the
+    /// second bridge, not used by the windows of long sequences, the automatic camera's
+    /// pre-test and the perspective camera's projective start.
+    #[serde(default = "default_escapes")]
     pub escapes: Vec<Bridge>,
 }
 
 fn default_second_bridge() -> Option<Bridge> {
     Some(Bridge::Pose { eta: 0.1 })
+}
+
+fn default_escapes() -> Vec<Bridge> {
+    vec![Bridge::Pose { eta: 0.01 }, Bridge::Pose { eta: 0.1 }]
 }
 
 impl Default for ProjectiveConfig {
@@ -170,9 +184,11 @@ impl Default for ProjectiveConfig {
             },
             refine: LmConfig {
                 geodesic_acceleration: 0.75,
+                extension_trials: 3,
+                window_relative_tolerance: 1e-7,
                 ..LmConfig::default()
             },
-            escapes: Vec::new(),
+            escapes: default_escapes(),
         }
     }
 }
@@ -873,6 +889,13 @@ fn bridge(
     Ok((cams, pts))
 }
 
+/// The long-tail stop of [`fit_observations`]' adjustment is never tighter than this
+/// fraction of the cost per window ([`LmConfig::window_relative_tolerance`]): at 10 000
+/// frames (3.3·10⁶ residuals) the adjustment lowers `χ²` by ~0.05 per solve for over 80
+/// solves while the RMS moves in its seventh digit (docs/results.md), and each solve costs
+/// seconds.
+pub const LONG_TAIL_TOLERANCE: f64 = 1e-6;
+
 /// One observation of a sparse track table: frame and track indices, pixel position.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Observation {
@@ -949,18 +972,21 @@ pub fn fit_observations(
         )?
     };
     // Started on the metric reference, the adjustment follows the chain's soft modes from
-    // the reference's shape: geodesic acceleration (WindowConfig's setting).
-    let accelerated;
-    let cfg = if on_reference {
-        accelerated = ProjectiveConfig {
-            refine: cfg
-                .refine
-                .or_geodesic(windows.reference_geodesic_acceleration),
-            ..cfg.clone()
-        };
-        &accelerated
+    // the reference's shape: geodesic acceleration (WindowConfig's setting). The long tail
+    // stops at no less than LONG_TAIL_TOLERANCE of the cost.
+    let mut refine = if on_reference {
+        cfg.refine
+            .or_geodesic(windows.reference_geodesic_acceleration)
     } else {
-        cfg
+        cfg.refine.clone()
+    };
+    if refine.window_relative_tolerance > 0.0 {
+        refine.window_relative_tolerance =
+            refine.window_relative_tolerance.max(LONG_TAIL_TOLERANCE);
+    }
+    let cfg = &ProjectiveConfig {
+        refine,
+        ..cfg.clone()
     };
     bundle_adjust(
         &g,

@@ -820,9 +820,10 @@ pub(crate) fn fit_window(
     pcfg: &super::ProjectiveConfig,
 ) -> Result<super::ProjectiveFit> {
     let c = complete_window(start, end, tracks, meas, cfg, None)?;
-    // One chain per window (the second bridge would double the windows' cost).
+    // One chain per window, no escapes (either would double the windows' cost).
     let pcfg = super::ProjectiveConfig {
         second_bridge: None,
+        escapes: Vec::new(),
         ..pcfg.clone()
     };
     super::fit(
