@@ -6,7 +6,9 @@
 //! `cargo run --release --example projective_benchmark -- [K] [FIRST_SEED] [VARIANT ...]`
 //!
 //! K random starts per row (default 100), seeds FIRST_SEED.. (default 0). Variants (default
-//! `pose0.01+pose0.1 pose0.01 direct`; `pose0.01+pose0.1` is the library's default):
+//! `default pose0.01+pose0.1 pose0.01 direct`):
+//! * `default`: the library's default chain, `pose0.01+pose0.1^pose0.01^pose0.1` (the
+//!   escapes default since 2026-12-03; `pose0.01+pose0.1` was the default before);
 //! * `poseETA`: affine → pOSE (weight ETA on the affine term, VarPro) → projective VarPro;
 //! * `direct`: affine → projective VarPro;
 //! * `A+B` (each `poseETA` or `direct`): both chains from the same affine optimum, the one
@@ -48,6 +50,10 @@ fn variant(name: &str) -> Option<ProjectiveConfig> {
     };
     // `CHAIN^E1^E2…`: the chain, then escapes from its adjusted end
     // (`ProjectiveConfig::escapes`), each `poseETA` or `direct`.
+    if name == "default" {
+        common::adjustment_knobs(&mut cfg.refine);
+        return Some(cfg);
+    }
     let mut parts = name.split('^');
     let name = parts.next()?;
     let (base, joint) = match name.strip_suffix("-joint") {
@@ -87,6 +93,7 @@ fn main() {
     let mut variants: Vec<String> = args.iter().skip(3).cloned().collect();
     if variants.is_empty() {
         variants = vec![
+            "default".into(),
             "pose0.01+pose0.1".into(),
             "pose0.01".into(),
             "direct".into(),
@@ -234,6 +241,24 @@ fn main() {
                             ))
                             .collect::<Vec<_>>()
                     );
+                    for b in &r.bridges {
+                        eprintln!(
+                            "  bridge {:?}: start {:.6} px, {} it, {:.3} s, kept {}",
+                            b.bridge, b.start_rms_px, b.iterations, b.seconds, b.kept
+                        );
+                    }
+                    for e in &r.escapes {
+                        eprintln!(
+                            "  escape {:?} from {:.6}: bridge end {:.6} -> {:.6} px, {} it, {:.3} s, kept {}",
+                            e.bridge,
+                            e.from_rms_px,
+                            e.bridge_rms_px,
+                            e.rms_px,
+                            e.iterations,
+                            e.seconds,
+                            e.kept
+                        );
+                    }
                 }
             }
             if failed {
