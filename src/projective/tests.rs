@@ -445,6 +445,19 @@ fn linear_triangulation_avoids_a_common_camera_centre() {
     }
 }
 
+/// Random affine cameras and points for `meas` (entries uniform in ±1, translations at
+/// the image centre (320, 240)): a start from nowhere near the optimum.
+fn random_affine(meas: &Measurements, seed: u64) -> (Mat<f64>, Mat<f64>, Vec<f64>) {
+    let (nf, np) = (meas.n_frames(), meas.n_points());
+    let mut rng = StdRng::seed_from_u64(seed);
+    let m = Mat::from_fn(2 * nf, 3, |_, _| rng.random_range(-1.0..1.0));
+    let s = Mat::from_fn(3, np, |_, _| rng.random_range(-1.0..1.0));
+    let t: Vec<f64> = (0..2 * nf)
+        .map(|i| if i % 2 == 0 { 320.0 } else { 240.0 })
+        .collect();
+    (m, s, t)
+}
+
 /// `escapes`: from where the adjustment stopped, a pOSE bridge from the adjusted cameras
 /// and a second adjustment; the lower model is kept and reported, with the chain of stages
 /// that led to it. Here the first adjustment is cut short (3 iterations from a random
@@ -453,13 +466,7 @@ fn linear_triangulation_avoids_a_common_camera_centre() {
 #[test]
 fn an_escape_from_the_adjusted_end_keeps_the_lower_model() {
     let (meas, _, _) = scene(16, 80, 2.5, 0.4, 12);
-    let (nf, np) = (meas.n_frames(), meas.n_points());
-    let mut rng = StdRng::seed_from_u64(3);
-    let m = Mat::from_fn(2 * nf, 3, |_, _| rng.random_range(-1.0..1.0));
-    let s = Mat::from_fn(3, np, |_, _| rng.random_range(-1.0..1.0));
-    let t: Vec<f64> = (0..2 * nf)
-        .map(|i| if i % 2 == 0 { 320.0 } else { 240.0 })
-        .collect();
+    let (m, s, t) = random_affine(&meas, 3);
     let cut = ProjectiveConfig {
         sturm_triggs: false,
         bridge: Bridge::Direct,
@@ -543,13 +550,7 @@ fn the_default_escapes_keep_the_lowest_model() {
         vec![Bridge::Pose { eta: 0.01 }, Bridge::Pose { eta: 0.1 }]
     );
     let (meas, _, _) = scene(12, 60, 2.5, 0.3, 21);
-    let (nf, np) = (meas.n_frames(), meas.n_points());
-    let mut rng = StdRng::seed_from_u64(8);
-    let m = Mat::from_fn(2 * nf, 3, |_, _| rng.random_range(-1.0..1.0));
-    let s = Mat::from_fn(3, np, |_, _| rng.random_range(-1.0..1.0));
-    let t: Vec<f64> = (0..2 * nf)
-        .map(|i| if i % 2 == 0 { 320.0 } else { 240.0 })
-        .collect();
+    let (m, s, t) = random_affine(&meas, 8);
     let start = AffineStart {
         m: m.as_ref(),
         s: s.as_ref(),
