@@ -151,10 +151,11 @@ pub struct ProjectiveConfig {
     /// objective, whose affine share smooths the projective cost, moves the cameras out of
     /// a local minimum whose basin the affine start led into. Default `[pOSE η = 0.01,
     /// pOSE η = 0.1]` (the two bridges of the chain). Measured from random starts
-    /// (docs/results.md, 2026-12-03): Hong et al.'s open and loop-closed spheres seen from
-    /// closest (S10.5, S10.5L) went from 45/50 to 48/50 each, and Blue bear's failed starts
-    /// reached the optimum's basin in 5 of 8; every escape costs a bridge and an adjustment,
-    /// 1.7–3 times the time per start (dino_trimmed 0.36 → 0.61 s). Empty: none. Like the
+    /// (docs/results.md, 2026-12-03), with the adjustment's tail of [`Self::refine`]: Hong et
+    /// al.'s open and loop-closed spheres seen from closest (S10.5, S10.5L) went from 45/50
+    /// to 49/50 each, Blue bear from 22/30 to 29/30; the escapes cost a bridge and an
+    /// adjustment each, about twice the time per start (dino_trimmed 0.23 → 0.43 s). Empty:
+    /// none. Like the
     /// second bridge, not used by the windows of long sequences, the automatic camera's
     /// pre-test and the perspective camera's projective start.
     #[serde(default = "default_escapes")]
