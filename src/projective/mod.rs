@@ -155,9 +155,8 @@ pub struct ProjectiveConfig {
     /// al.'s open and loop-closed spheres seen from closest (S10.5, S10.5L) went from 45/50
     /// to 49/50 each, Blue bear from 22/30 to 29/30; the escapes cost a bridge and an
     /// adjustment each, about twice the time per start (dino_trimmed 0.23 → 0.43 s). Empty:
-    /// none. Like the
-    /// second bridge, not used by the windows of long sequences, the automatic camera's
-    /// pre-test and the perspective camera's projective start.
+    /// none. Like the second bridge, not used by the windows of long sequences, the
+    /// automatic camera's pre-test and the perspective camera's projective start.
     #[serde(default = "default_escapes")]
     pub escapes: Vec<Bridge>,
 }
