@@ -249,14 +249,15 @@ fn main() {
                     }
                     for e in &r.escapes {
                         eprintln!(
-                            "  escape {:?} from {:.6}: bridge end {:.6} -> {:.6} px, {} it, {:.3} s, kept {}",
+                            "  escape {:?} from {:.6}: bridge end {:.6} -> {:.6} px, {} it, {:.3} s, kept {}, returned {}",
                             e.bridge,
                             e.from_rms_px,
                             e.bridge_rms_px,
                             e.rms_px,
                             e.iterations,
                             e.seconds,
-                            e.kept
+                            e.kept,
+                            e.returned
                         );
                     }
                 }

@@ -470,6 +470,7 @@ impl SparseProblem {
             name: "sparse-varpro",
             run,
             rms_scale: self.scale,
+            stop: None,
         };
         let model = ScaledOrthographic {
             scaled: camera != CameraModel::Orthographic,

@@ -504,6 +504,9 @@ impl Default for LmConfig {
     }
 }
 
+/// A caller's stopping test ([`Progress::stop`]): cameras, points, cost → stop?
+pub type StopTest<'s> = dyn FnMut(&[f64], &[f64], f64) -> bool + 's;
+
 /// How [`minimize`] reports its iterations to an observer.
 pub struct Progress<'a> {
     pub observer: &'a mut dyn Observer,
@@ -513,6 +516,11 @@ pub struct Progress<'a> {
     /// Multiplies `sqrt(cost / #residuals)` to give the RMS reported (pixels per model
     /// unit, and `1/sqrt(m/2)`-style factors for models with extra residual terms).
     pub rms_scale: f64,
+    /// The caller's stopping test, asked after each accepted step with the cameras, the
+    /// points and the cost: `true` ends the run, reported as converged. An escape
+    /// ([`super::ProjectiveConfig::escapes`]) stops once it is back in the basin of the
+    /// model it left. `None`: no such test.
+    pub stop: Option<&'a mut StopTest<'a>>,
 }
 
 /// The reduced camera system's fixed sparsity pattern (lower triangle, CSC) and its
@@ -2873,6 +2881,10 @@ pub fn minimize_shared<M: BundleModel>(
                     || step2.sqrt()
                         < cfg.parameter_tolerance * (par2.sqrt() + cfg.parameter_tolerance)
                     || cur <= cfg.absolute_tolerance * n_res
+                    || progress
+                        .stop
+                        .as_mut()
+                        .is_some_and(|stop| stop(cams, pts, cur))
                 {
                     status = SolverStatus::Converged;
                 }

@@ -154,8 +154,10 @@ pub struct ProjectiveConfig {
     /// (docs/results.md, 2026-12-03), with the adjustment's tail of [`Self::refine`]: Hong et
     /// al.'s open and loop-closed spheres seen from closest (S10.5, S10.5L) went from 45/50
     /// to 49/50 each, Blue bear from 22/30 to 29/30; the escapes cost a bridge and an
-    /// adjustment each, about twice the time per start (dino_trimmed 0.23 → 0.43 s). Empty:
-    /// none. Like the second bridge, not used by the windows of long sequences, the
+    /// adjustment each. An escape's adjustment that comes back into the basin of the
+    /// model it left stops there ([`EscapeOutcome::returned`], `back_in_basin`): it would
+    /// end at that model. Wilshire: 80 → 31 s per start with it (both escapes return;
+    /// docs/results.md, forty-second session). Empty: none. Like the second bridge, not used by the windows of long sequences, the
     /// automatic camera's pre-test and the perspective camera's projective start.
     #[serde(default = "default_escapes")]
     pub escapes: Vec<Bridge>,
@@ -399,6 +401,11 @@ pub struct EscapeOutcome {
     pub seconds: f64,
     /// Whether the model it reached was lower and replaced the one escaped from.
     pub kept: bool,
+    /// Whether the adjustment stopped once back in the basin of the model escaped from
+    /// (`back_in_basin`): it would have ended there, so it is not kept, and `rms_px` is
+    /// where it stopped.
+    #[serde(default)]
+    pub returned: bool,
 }
 
 /// One bridge tried from the affine start ([`ProjectiveConfig::second_bridge`]).
@@ -688,13 +695,16 @@ pub fn fit(
             cfg,
             end.run,
             observer,
+            None,
         )?;
         fit.bridges = end.outcomes;
         escape(&g, &norm, px, &mut fit, cfg, end.run, observer);
         return Ok(fit);
     };
 
-    bundle_adjust(&g, &norm, cams, pts, start, stages, cfg, run, observer)
+    bundle_adjust(
+        &g, &norm, cams, pts, start, stages, cfg, run, observer, None,
+    )
 }
 
 /// Reprojection RMS of `cost` (a sum of squared residuals over `g`'s observed scalars),
@@ -706,9 +716,12 @@ fn rms_of_cost(g: &Graph, scale: f64, cost: f64) -> f64 {
 /// [`ProjectiveConfig::escapes`]: from the adjusted model in `fit`, each bridge in turn
 /// (pOSE re-solves the points for the adjusted cameras; the direct bridge starts from the
 /// model's affine points `X/w`), then the adjustment; the lower model replaces `fit`'s
-/// (its stages and report with it, the affine stage's bridges kept). A bridge or adjustment
-/// that fails is reported and loses. Cost: one bridge and one adjustment per escape, each
-/// linear in the observations per iteration as in [`fit`].
+/// (its stages and report with it, the affine stage's bridges kept). An adjustment that
+/// comes back into the basin of the model it left ([`back_in_basin`]) stops there and is
+/// not kept. A bridge or adjustment that fails is reported and loses. Cost: one bridge and
+/// one adjustment per escape, each linear in the observations per iteration as in [`fit`]
+/// (the return test: one projection per observation after an accepted step within the
+/// gate).
 #[allow(clippy::too_many_arguments)]
 fn escape(
     g: &Graph,
@@ -742,19 +755,45 @@ fn escape(
             iterations: 0,
             seconds: 0.0,
             kept: false,
+            returned: false,
+        };
+        // The model escaped from, for the test of a return to its basin.
+        let left_cost = bundle::cost(&models::Projective, g, &cams, &pts, &[]);
+        let left = predictions(g, &cams, &pts);
+        let mut returned = |c: &[f64], x: &[f64], cost: f64| {
+            outcome.returned = back_in_basin(g, &left, left_cost, c, x, cost);
+            outcome.returned
         };
         let end = bridge(g, px, cams, x3, b, cfg, run, observer, &mut stages);
-        let adjusted = end.ok().and_then(|(c, x)| {
+        let adjusted = end.ok().map(|(c, x)| {
             let cost = bundle::cost(&models::Projective, g, &c, &x, &[]);
-            outcome.bridge_rms_px = rms_of_cost(g, px, cost);
-            outcome.iterations = stages.iter().map(|s| s.iterations).sum();
-            bundle_adjust(g, norm, c, x, fit.start, stages, cfg, run, observer).ok()
+            let bridge_rms_px = rms_of_cost(g, px, cost);
+            let bridge_iterations = stages.iter().map(|s| s.iterations).sum();
+            let f = bundle_adjust(
+                g,
+                norm,
+                c,
+                x,
+                fit.start,
+                stages,
+                cfg,
+                run,
+                observer,
+                Some(&mut returned),
+            )
+            .ok();
+            (f, bridge_rms_px, bridge_iterations)
         });
         outcome.seconds = t0.elapsed().as_secs_f64();
+        let adjusted = adjusted.and_then(|(f, rms, it)| {
+            outcome.bridge_rms_px = rms;
+            outcome.iterations = it;
+            f
+        });
         if let Some(mut f) = adjusted {
             outcome.rms_px = f.rms_px;
             outcome.iterations += f.report.iterations;
-            if f.rms_px < fit.rms_px {
+            if !outcome.returned && f.rms_px < fit.rms_px {
                 outcome.kept = true;
                 f.bridges = std::mem::take(&mut fit.bridges);
                 f.escapes = std::mem::take(&mut fit.escapes);
@@ -767,6 +806,60 @@ fn escape(
         }
         fit.escapes.push(outcome);
     }
+}
+
+/// `π(P_f X_p)` at each observation of `g`, in its order (2 numbers per observation):
+/// normalized cameras (12 each) and points (4 each).
+fn predictions(g: &Graph, cams: &[f64], pts: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; 2 * g.n_obs()];
+    for p in 0..g.n_pts {
+        let x: &[f64; 4] = pts[4 * p..4 * p + 4].try_into().unwrap_or(&[0.0; 4]);
+        for o in g.track(p) {
+            let f = g.cam[o];
+            let c: &[f64; 12] = cams[12 * f..12 * f + 12].try_into().unwrap_or(&[0.0; 12]);
+            out[2 * o..2 * o + 2].copy_from_slice(&project(c, x));
+        }
+    }
+    out
+}
+
+/// How near in cost an escape's adjustment must come to the model it left before
+/// [`back_in_basin`] compares their predictions: this fraction of that model's cost. The
+/// predictions of a model in its basin then differ by an RMS of at most `√(2·10⁻³)` ≈ 4.5 %
+/// of its residuals' (0.02 px at 0.45 px), where the Gauss–Newton model of the minimum holds.
+const RETURN_GATE: f64 = 1e-3;
+
+/// Whether the model (`cams`, `pts`) of cost `cost` is back in the basin of the adjusted
+/// model it escaped from (predictions `left`, cost `left_cost`), so that the adjustment
+/// from it would end where that one did. Near a local minimum `b` of `E(x) = ‖P(x) − w‖²`,
+/// `E(x) − E(b) = ‖P(x) − P(b)‖² + 2 (P(b) − w)ᵀ(P(x) − P(b))`, whose second term vanishes
+/// to first order at a minimum (the residual is orthogonal to the model's tangent space):
+/// in `b`'s basin and near it the excess cost is the predictions' squared distance (the
+/// Gauss–Newton model of the minimum), while a model at the same cost in another basin
+/// predicts differently by much more. The test: `0 ≤ E(x) − E(b) ≤` [`RETURN_GATE`]`·E(b)`
+/// and `‖P(x) − P(b)‖² ≤ 2 (E(x) − E(b))`. A model below `b` never returns (it may end
+/// lower); one whose predictions are farther than the quadratic model allows (a curved
+/// valley, another basin) goes on, as it would without the test. Predictions are invariant
+/// to the projective gauge, so the two models need no alignment. Cost: one projection per
+/// observation, `O(#observations)`, once the cost is within the gate.
+fn back_in_basin(
+    g: &Graph,
+    left: &[f64],
+    left_cost: f64,
+    cams: &[f64],
+    pts: &[f64],
+    cost: f64,
+) -> bool {
+    let excess = cost - left_cost;
+    if !(excess >= 0.0 && excess <= RETURN_GATE * left_cost) {
+        return false;
+    }
+    let d2: f64 = predictions(g, cams, pts)
+        .iter()
+        .zip(left)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum();
+    d2.is_finite() && d2 <= 2.0 * excess
 }
 
 /// Where [`bridges`] leaves the adjustment to start: cameras and points (projective
@@ -998,6 +1091,7 @@ pub fn fit_observations(
         cfg,
         0,
         observer,
+        None,
     )
 }
 
@@ -1251,6 +1345,7 @@ fn adjust_from(
         cfg,
         run,
         observer,
+        None,
     )
 }
 
@@ -1285,6 +1380,7 @@ fn bundle_adjust(
     cfg: &ProjectiveConfig,
     run: usize,
     observer: &mut dyn Observer,
+    stop: Option<&mut bundle::StopTest<'_>>,
 ) -> Result<ProjectiveFit> {
     let px = 1.0 / norm.scale;
     let stage = Stage {
@@ -1292,7 +1388,7 @@ fn bundle_adjust(
         what: "projective bundle adjustment",
         rms_scale: px,
     };
-    let r = stage.run(
+    let r = stage.run_until(
         &models::Projective,
         g,
         &mut cams,
@@ -1302,6 +1398,7 @@ fn bundle_adjust(
         run,
         observer,
         &mut stages,
+        stop,
     )?;
     let rms_px = rms_of_cost(g, px, r.report.final_cost);
     let model = to_pixels(&cams, &pts, g, norm);
@@ -1342,6 +1439,24 @@ impl Stage {
         observer: &mut dyn Observer,
         stages: &mut Vec<StageReport>,
     ) -> Result<bundle::LmResult> {
+        self.run_until(model, g, cams, pts, glob, cfg, run, observer, stages, None)
+    }
+
+    /// [`Self::run`] with the caller's stopping test ([`Progress::stop`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn run_until<M: bundle::BundleModel>(
+        &self,
+        model: &M,
+        g: &Graph,
+        cams: &mut [f64],
+        pts: &mut [f64],
+        glob: &mut [f64],
+        cfg: &LmConfig,
+        run: usize,
+        observer: &mut dyn Observer,
+        stages: &mut Vec<StageReport>,
+        stop: Option<&mut bundle::StopTest<'_>>,
+    ) -> Result<bundle::LmResult> {
         let rms = |cost: f64| rms_of_cost(g, self.rms_scale, cost);
         let t0 = Instant::now();
         observer.on_event(&Event::StageStarted { stage: self.name });
@@ -1360,6 +1475,7 @@ impl Stage {
                 run,
                 // The engine divides by its residual count (m per observation).
                 rms_scale: self.rms_scale * (model.res_dim() as f64 / 2.0).sqrt(),
+                stop: stop.map(|s| &mut *s as &mut bundle::StopTest<'_>),
             },
         )
         .map_err(|message| Error::Numerical {

@@ -1043,6 +1043,7 @@ fn local_refine(
             name: "local-ba",
             run: 0,
             rms_scale: 1.0,
+            stop: None,
         },
     )
     .map_err(|message| Error::Numerical {
