@@ -139,9 +139,15 @@ pub struct ProjectiveConfig {
     /// window ([`LmConfig::window_relative_tolerance`], `10⁻⁶` in [`LmConfig::default`]):
     /// near Blue bear's optimum the adjustment lowers the cost by ~10⁻⁶ of itself per
     /// window for over a hundred steps, so the `10⁻⁶` rule stopped it 2·10⁻⁶ of the RMS
-    /// above the optimum, outside the benchmark's 10⁻⁶ (docs/results.md, 2026-12-03).
-    /// [`fit_observations`] (long sequences) keeps the tail at no less than
-    /// [`LONG_TAIL_TOLERANCE`].
+    /// above the optimum, outside the benchmark's 10⁻⁶ (docs/results.md, 2026-12-03); and
+    /// no stop at the noise level ([`LmConfig::noise_tolerance`] 0, `0.01` in
+    /// [`LmConfig::default`]): on small tables that rule ends a linearly converging tail
+    /// while the RMS is still ~10⁻⁶ of itself above the optimum (S10.5L, 5·10³ residuals:
+    /// 0.862545912 px, 0.007 χ² units above 0.862545158; docs/results.md, forty-second
+    /// session), which the escapes' adjustments used to finish and no longer do once they
+    /// stop on returning. The tail's rules are then the window above, the Gauss–Newton
+    /// decrement and the iteration cap. [`fit_observations`] (long sequences) keeps the
+    /// tail at no less than [`LONG_TAIL_TOLERANCE`].
     pub refine: LmConfig,
     /// Escapes from the adjusted end, tried in turn after [`fit`]'s adjustment from an
     /// affine start (not after the Sturm–Triggs start, [`refine`] or the windows of long
@@ -188,6 +194,7 @@ impl Default for ProjectiveConfig {
                 geodesic_acceleration: 0.75,
                 extension_trials: 3,
                 window_relative_tolerance: 1e-7,
+                noise_tolerance: 0.0,
                 ..LmConfig::default()
             },
             escapes: default_escapes(),
