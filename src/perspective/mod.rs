@@ -1075,6 +1075,7 @@ fn adjust_graph(
             run,
             observer,
             &mut stages,
+            None,
         )?
         .report;
     let mut principal_point_rejected = None;
@@ -1108,6 +1109,7 @@ fn adjust_graph(
                     run,
                     observer,
                     &mut stages,
+                    None,
                 )?
                 .report;
             if pp_free

@@ -971,6 +971,7 @@ fn bridge(
                 run,
                 observer,
                 stages,
+                None,
             )?;
             (c, x)
         }
@@ -1395,7 +1396,7 @@ fn bundle_adjust(
         what: "projective bundle adjustment",
         rms_scale: px,
     };
-    let r = stage.run_until(
+    let r = stage.run(
         &models::Projective,
         g,
         &mut cams,
@@ -1433,25 +1434,10 @@ pub(crate) struct Stage {
 }
 
 impl Stage {
+    /// Runs [`bundle::minimize_shared`] with `stop`, the caller's stopping test
+    /// ([`Progress::stop`]; `None`: none), and pushes the stage's report.
     #[allow(clippy::too_many_arguments)]
     pub fn run<M: bundle::BundleModel>(
-        &self,
-        model: &M,
-        g: &Graph,
-        cams: &mut [f64],
-        pts: &mut [f64],
-        glob: &mut [f64],
-        cfg: &LmConfig,
-        run: usize,
-        observer: &mut dyn Observer,
-        stages: &mut Vec<StageReport>,
-    ) -> Result<bundle::LmResult> {
-        self.run_until(model, g, cams, pts, glob, cfg, run, observer, stages, None)
-    }
-
-    /// [`Self::run`] with the caller's stopping test ([`Progress::stop`]).
-    #[allow(clippy::too_many_arguments)]
-    pub fn run_until<M: bundle::BundleModel>(
         &self,
         model: &M,
         g: &Graph,
